@@ -1,0 +1,52 @@
+# gesturelib: the commands of the README. Each target sets itself up when needed
+# (a virtual environment in .venv with the tested versions of requirements-lock.txt)
+# and is fast when that is already done.
+
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+# Extra pip arguments for the PyTorch install only, e.g. an index of CPU-only wheels on a Linux
+# laptop without a GPU (see the README). Empty by default.
+TORCH_PIP_ARGS ?=
+TORCH_VERSION := $(shell sed -n 's/^torch==//p' requirements-lock.txt)
+STAMP := $(VENV)/.installed
+OUT ?= outputs/demo
+
+.PHONY: setup demo test lab lint benchmark lock clean
+
+setup: $(STAMP)
+
+$(STAMP): requirements-lock.txt pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	@# PyTorch first and on its own, so that TORCH_PIP_ARGS can pick a CPU-only build.
+	$(BIN)/python -m pip install --quiet $(TORCH_PIP_ARGS) "torch==$(TORCH_VERSION)"
+	$(BIN)/python -m pip install --quiet -r requirements-lock.txt
+	$(BIN)/python -m pip install --quiet --no-deps -e .
+	@touch $(STAMP)
+
+## make demo: generate a short conversation and render it (video with sound) into $(OUT)
+demo: setup
+	$(BIN)/python -m gesturelib demo --out $(OUT)
+
+## make test: lint, unit tests and every notebook executed in quick mode
+test: setup
+	$(BIN)/ruff check .
+	GESTURELIB_QUICK=1 MPLBACKEND=Agg $(BIN)/python -m pytest tests notebooks \
+		--nbval-lax --nbval-current-env --nbval-cell-timeout=300
+
+## make lab: open JupyterLab on the notebooks
+lab: setup
+	$(BIN)/jupyter lab notebooks
+
+## make benchmark: the speed figures quoted in the README
+benchmark: setup
+	for script in benchmarks/bench_*.py; do $(BIN)/python $$script || exit 1; done
+
+## make lock: record the exact versions of the current environment as the tested set
+lock:
+	$(BIN)/python -m pip freeze --exclude-editable | sed 's/^torch==\([0-9.]*\)+.*/torch==\1/' \
+		> requirements-lock.txt
+
+clean:
+	rm -rf $(VENV) outputs .pytest_cache

@@ -1,0 +1,460 @@
+"""Speech features at the motion frame rate: audio I/O, log-mel, MFCC, prosody, speech activity.
+
+Every feature here has exactly one row per motion frame. A recording of ``n`` samples at
+``sample_rate`` Hz lasts ``n / sample_rate`` seconds and covers
+
+    T = floor(n / sample_rate * fps)          (see :func:`num_frames`)
+
+whole motion frames; a trailing partial frame is dropped. Row ``t`` describes the audio of motion
+frame ``t``, i.e. the time interval ``[t / fps, (t + 1) / fps)``. In samples that interval starts
+at ``t * sample_rate / fps``, which need not be an integer (22050 Hz at 30 fps gives 735 samples a
+frame, 8000 Hz at 30 fps gives 266.67). We therefore place every frame at its exact position and
+round to the nearest sample, so the rows never drift away from the motion, however long the clip.
+(``librosa.stft`` only takes an integer hop, which would drift; we use librosa for the mel filter
+bank, the window and the DCT, and do the framing here.)
+
+Conventions:
+
+* Log-mel (:func:`mel_spectrogram`): natural log of the mel power spectrum plus :data:`MEL_FLOOR`,
+  so silence gives ``log(MEL_FLOOR)`` (about -23), never ``-inf``. The analysis window is a Hann
+  window one motion frame long (40 ms at 25 fps, the 27 log-mel bands from 40 ms windows of the
+  Flow-VAE paper), centred on the middle of the frame, ``(t + 0.5) / fps``: it spans the frame's
+  interval and nothing else. Bands run from 0 Hz to the Nyquist frequency, so features are only
+  comparable between recordings at the same sample rate; :func:`load_audio` resamples to 16 kHz.
+* MFCC (:func:`mfcc`): the DCT-II (orthonormal) of that log-mel, i.e. the same frames.
+* Prosody (:func:`prosody`): the four features of Kucherenko et al. (2021), named in
+  :data:`PROSODY_FEATURES`; see that function for how unvoiced frames are handled.
+* Speech activity (:func:`activity_one_hot`): one :class:`~gesturelib.conventions.Activity` code
+  per motion frame, one-hot encoded for the models.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+
+import librosa
+import numpy as np
+import scipy.fft
+import soundfile
+
+from gesturelib.conventions import FPS, N_MELS, SAMPLE_RATE, Activity
+
+#: Added to the mel power before the log: silence gives log(1e-10) ~ -23 instead of -inf.
+#: It sits below the quantisation noise of 16-bit audio, so it only affects true digital silence.
+MEL_FLOOR = 1e-10
+#: Added to the mean-square amplitude before the log in the prosody energy (-100 dB full scale).
+ENERGY_FLOOR = 1e-10
+
+#: Columns of :func:`prosody`, in order.
+PROSODY_FEATURES = ("log_energy", "log_f0", "d_log_energy", "d_log_f0")
+#: F0 search range in Hz: Praat's default pitch floor and ceiling (Kucherenko et al. used Praat).
+F0_MIN = 75.0
+F0_MAX = 600.0
+#: A pitch frame is voiced when the signal correlates with itself one period later at least this
+#: much (Praat's default voicing threshold)...
+VOICING_THRESHOLD = 0.45
+#: ...and its peak amplitude reaches this fraction of the recording's peak (Praat's silence
+#: threshold).
+SILENCE_THRESHOLD = 0.03
+#: Pitch frames per motion frame: F0 is estimated at this finer rate, then averaged per frame.
+PITCH_FRAMES_PER_FRAME = 4
+
+_FRAMES_PER_BLOCK = 4096  # frames analysed at once: bounds memory on long recordings
+
+
+class AudioError(ValueError):
+    """An audio file or signal that cannot be used: empty, unreadable, non-finite, too short."""
+
+
+# --------------------------------------------------------------------------- audio files
+
+
+def load_audio(
+    path: str | os.PathLike, sample_rate: int | None = SAMPLE_RATE
+) -> tuple[np.ndarray, int]:
+    """Read an audio file as a mono float32 signal ``(n,)`` in [-1, 1], resampled on request.
+
+    Reads any WAV that libsndfile understands (8-bit unsigned, 16/24/32-bit integer PCM, 32/64-bit
+    float; any number of channels; any rate), and FLAC or OGG too. Channels are down-mixed by
+    averaging. A float file whose peak exceeds 1 is scaled down to peak 1 (with a warning) rather
+    than clipped; resampling (``librosa.resample``, soxr) can overshoot by a hair, which is clipped.
+
+    Args:
+        path: the audio file.
+        sample_rate: rate in Hz to resample to; ``None`` keeps the file's own rate.
+
+    Returns:
+        ``(audio, rate)``: the signal ``(n,)`` float32 and its sample rate in Hz.
+
+    Raises:
+        FileNotFoundError: if ``path`` does not exist.
+        AudioError: if ``path`` is a directory, an empty file, not audio, has no samples, or
+            contains NaN or infinite values. The message names the file.
+    """
+    path = Path(path)
+    if sample_rate is not None:
+        _check_positive_int(sample_rate, "sample_rate")
+    if not path.exists():
+        raise FileNotFoundError(f"audio file not found: {path}")
+    if path.is_dir():
+        raise AudioError(f"{path} is a directory, not an audio file")
+    if path.stat().st_size == 0:
+        raise AudioError(f"{path} is an empty file (0 bytes), not audio")
+    try:
+        data, file_rate = soundfile.read(path, dtype="float32", always_2d=True)
+    except (soundfile.LibsndfileError, RuntimeError) as error:
+        raise AudioError(
+            f"{path} could not be read as audio ({error}); expected a WAV, FLAC or OGG file"
+        ) from error
+
+    if data.size == 0:
+        raise AudioError(f"{path} contains no samples (a header without audio data)")
+    audio = data.mean(axis=1, dtype=np.float32)  # (n, channels) -> (n,)
+    not_finite = ~np.isfinite(audio)
+    if not_finite.all():
+        raise AudioError(f"{path}: every sample is NaN or infinite; the signal is unusable")
+    if not_finite.any():
+        raise AudioError(
+            f"{path}: {int(not_finite.sum())} of {audio.size} samples are NaN or infinite"
+        )
+
+    peak = float(np.abs(audio).max())
+    if peak > 1.0:
+        warnings.warn(
+            f"{path}: float samples reach {peak:.3g}, beyond [-1, 1]; scaled down to peak 1",
+            stacklevel=2,
+        )
+        audio = audio / np.float32(peak)
+    if sample_rate is not None and sample_rate != file_rate:
+        audio = librosa.resample(audio, orig_sr=file_rate, target_sr=sample_rate)
+        audio = np.clip(audio, -1.0, 1.0).astype(np.float32, copy=False)
+        file_rate = sample_rate
+    return audio, int(file_rate)
+
+
+def save_audio(
+    path: str | os.PathLike, audio: np.ndarray, sample_rate: int, overwrite: bool = False
+) -> None:
+    """Write a mono signal ``(n,)`` as a 16-bit PCM WAV file.
+
+    Samples outside [-1, 1] are clipped to [-1, 1] (16-bit PCM cannot hold them); scale the
+    signal first if it is louder than full scale.
+
+    Args:
+        path: the file to write; must end in ``.wav`` and its folder must exist.
+        audio: the signal ``(n,)``, finite, at least one sample.
+        sample_rate: its rate in Hz.
+        overwrite: replace an existing file; by default an existing file is an error.
+
+    Raises:
+        FileExistsError: if ``path`` exists and ``overwrite`` is False.
+        FileNotFoundError: if the folder of ``path`` does not exist.
+        ValueError: for a path not ending in ``.wav``, or a bad signal (:class:`AudioError`).
+    """
+    path = Path(path)
+    audio = _check_signal(audio, "audio")
+    _check_positive_int(sample_rate, "sample_rate")
+    if path.suffix.lower() != ".wav":
+        raise ValueError(f"save_audio writes WAV files; {path} should end in .wav")
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"cannot write {path}: the folder {path.parent} does not exist")
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} already exists; pass overwrite=True to replace it")
+    soundfile.write(path, np.clip(audio, -1.0, 1.0), sample_rate, subtype="PCM_16", format="WAV")
+
+
+# --------------------------------------------------------------------------- frame alignment
+
+
+def num_frames(n_samples: int, sample_rate: int, fps: int = FPS) -> int:
+    """Number of whole motion frames in ``n_samples`` of audio: ``floor(n_samples / sample_rate * fps)``.
+
+    Computed in integers, so there is no floating-point rounding at frame boundaries.
+    """
+    _check_positive_int(sample_rate, "sample_rate")
+    _check_positive_int(fps, "fps")
+    if n_samples < 0:
+        raise ValueError(f"n_samples must be >= 0, got {n_samples}")
+    return int(n_samples) * int(fps) // int(sample_rate)
+
+
+def _frame_window_starts(n_frames: int, sample_rate: int, fps: int) -> tuple[np.ndarray, int]:
+    """First sample ``(T,)`` of each frame's analysis window, and the window length in samples.
+
+    The window is ``W = round(sample_rate / fps)`` samples long and centred on the middle of motion
+    frame ``t``, ``(t + 0.5) * sample_rate / fps``; its start ``centre - W / 2`` is rounded to
+    the nearest sample. Integer arithmetic keeps this exact for any rate and frame count.
+    """
+    window = (2 * sample_rate + fps) // (2 * fps)
+    t = np.arange(n_frames, dtype=np.int64)
+    # round(((2t + 1) * sr - W * fps) / (2 * fps)) == floor((... + fps) / (2 * fps))
+    starts = ((2 * t + 1) * sample_rate - window * fps + fps) // (2 * fps)
+    return starts, window
+
+
+def _frame_boundaries(n_frames: int, sample_rate: int, fps: int) -> np.ndarray:
+    """Sample index ``(T + 1,)`` where each motion frame starts, ``round(t * sr / fps)``, and the end."""
+    t = np.arange(n_frames + 1, dtype=np.int64)
+    return (2 * t * sample_rate + fps) // (2 * fps)
+
+
+# --------------------------------------------------------------------------- spectral features
+
+
+def mel_spectrogram(
+    audio: np.ndarray, sample_rate: int, fps: int = FPS, n_mels: int = N_MELS
+) -> np.ndarray:
+    """Log-mel spectrogram ``(T, n_mels)`` float32 with one row per motion frame.
+
+    ``T = floor(len(audio) / sample_rate * fps)``. Row ``t`` is the natural log of the mel power
+    spectrum (plus :data:`MEL_FLOOR`) of a Hann window one motion frame long (40 ms at 25 fps),
+    centred on ``(t + 0.5) / fps`` seconds, i.e. covering the interval ``[t / fps, (t + 1) / fps)``.
+    The window is zero-padded to the next power of two for the FFT; the mel filter bank is
+    ``librosa.filters.mel`` (Slaney scale and normalisation) from 0 Hz to ``sample_rate / 2``.
+
+    Args:
+        audio: mono signal ``(n,)``, finite, at least one motion frame long.
+        sample_rate: its rate in Hz (an integer).
+        fps: motion frames per second (an integer).
+        n_mels: number of mel bands.
+
+    Raises:
+        AudioError: for non-1-D, empty, non-finite or shorter-than-one-frame audio.
+    """
+    audio, n_frames = _check_features_input(audio, sample_rate, fps)
+    _check_positive_int(n_mels, "n_mels")
+    starts, window_length = _frame_window_starts(n_frames, sample_rate, fps)
+    n_fft = 1 << (window_length - 1).bit_length()  # next power of two >= window_length
+    window = librosa.filters.get_window("hann", window_length, fftbins=True).astype(np.float32)
+    mel_basis = librosa.filters.mel(sr=sample_rate, n_fft=n_fft, n_mels=n_mels).astype(np.float32)
+
+    # Rounding the last window's start can push its end one sample past the audio: pad with zeros.
+    overhang = int(starts[-1]) + window_length - audio.size
+    if overhang > 0:
+        audio = np.pad(audio, (0, overhang))
+    offsets = np.arange(window_length)
+    mel_power = np.empty((n_frames, n_mels), dtype=np.float32)
+    for first in range(0, n_frames, _FRAMES_PER_BLOCK):
+        block = slice(first, first + _FRAMES_PER_BLOCK)
+        frames = audio[starts[block, None] + offsets] * window  # (frames, W)
+        spectrum = scipy.fft.rfft(frames, n=n_fft, axis=1)  # (frames, n_fft // 2 + 1)
+        power = spectrum.real**2 + spectrum.imag**2
+        mel_power[block] = power @ mel_basis.T
+    return np.log(mel_power + np.float32(MEL_FLOOR))
+
+
+def mfcc(
+    audio: np.ndarray, sample_rate: int, fps: int = FPS, n_mfcc: int = 13, n_mels: int = N_MELS
+) -> np.ndarray:
+    """Mel-frequency cepstral coefficients ``(T, n_mfcc)`` float32, aligned like the log-mel.
+
+    The orthonormal DCT-II (``librosa.feature.mfcc``) of each row of :func:`mel_spectrogram`;
+    coefficient 0 is the overall log level. ``n_mfcc`` must not exceed ``n_mels``.
+    """
+    _check_positive_int(n_mfcc, "n_mfcc")
+    if n_mfcc > n_mels:
+        raise ValueError(f"n_mfcc={n_mfcc} cannot exceed n_mels={n_mels}")
+    log_mel = mel_spectrogram(audio, sample_rate, fps=fps, n_mels=n_mels)  # (T, n_mels)
+    coefficients = librosa.feature.mfcc(S=log_mel.T, n_mfcc=n_mfcc)  # (n_mfcc, T)
+    return coefficients.T.astype(np.float32)
+
+
+# --------------------------------------------------------------------------- prosody
+
+
+def prosody(audio: np.ndarray, sample_rate: int, fps: int = FPS) -> np.ndarray:
+    """Prosodic features ``(T, 4)`` float32: columns :data:`PROSODY_FEATURES`, aligned like the mel.
+
+    As in Kucherenko et al. (2021): energy, log-F0 and their time derivatives.
+
+    * ``log_energy``: natural log of the mean squared amplitude over exactly the samples of the
+      frame, ``[t / fps, (t + 1) / fps)``, plus :data:`ENERGY_FLOOR` (silence gives about -23).
+    * ``log_f0``: natural log of F0 in Hz. F0 is estimated with YIN (``librosa.yin``, searching
+      :data:`F0_MIN` to :data:`F0_MAX` Hz) :data:`PITCH_FRAMES_PER_FRAME` times per motion frame.
+      A pitch frame counts as voiced when the signal correlates with itself one period later by at
+      least :data:`VOICING_THRESHOLD` and is not silent (peak at least :data:`SILENCE_THRESHOLD`
+      of the recording's peak). Unvoiced pitch frames get log-F0 linearly interpolated between
+      the neighbouring voiced ones (held constant before the first and after the last), so the
+      contour, and its derivative, stay continuous across voicing boundaries; the pitch frames
+      whose centres fall in a motion frame are then averaged. A recording with no voiced frame
+      at all gets the constant ``log(F0_MIN)``.
+    * ``d_log_energy``, ``d_log_f0``: time derivatives per second (central differences,
+      one-sided at the ends; zero for a single frame).
+
+    YIN keeps this fast (about 1.5 s for 10 minutes of 16 kHz audio on two CPU cores); pYIN
+    would decide voicing itself but takes about 1.5 minutes for the same audio.
+
+    Args:
+        audio: mono signal ``(n,)``, finite, at least one motion frame long.
+        sample_rate: its rate in Hz, at least ``2 * F0_MAX``.
+        fps: motion frames per second (an integer).
+    """
+    audio, n_frames = _check_features_input(audio, sample_rate, fps)
+    if sample_rate < 2 * F0_MAX:
+        raise AudioError(
+            f"prosody needs sample_rate >= {2 * F0_MAX:g} Hz to find pitch up to {F0_MAX:g} Hz, "
+            f"got {sample_rate}"
+        )
+    boundaries = _frame_boundaries(n_frames, sample_rate, fps)
+    squares = np.square(audio[: boundaries[-1]], dtype=np.float64)
+    mean_square = np.add.reduceat(squares, boundaries[:-1]) / np.diff(boundaries)
+    log_energy = np.log(mean_square + ENERGY_FLOOR)
+    log_f0 = _log_f0_per_frame(audio, sample_rate, fps, n_frames)
+
+    columns = [log_energy, log_f0]
+    for contour in (log_energy, log_f0):
+        if n_frames > 1:
+            columns.append(np.gradient(contour, 1.0 / fps))
+        else:
+            columns.append(np.zeros(1))
+    return np.stack(columns, axis=1).astype(np.float32)
+
+
+def _log_f0_per_frame(audio: np.ndarray, sample_rate: int, fps: int, n_frames: int) -> np.ndarray:
+    """Log-F0 ``(T,)`` per motion frame, unvoiced gaps interpolated (see :func:`prosody`)."""
+    hop = max(1, sample_rate // (PITCH_FRAMES_PER_FRAME * fps))
+    # YIN wants two periods of the lowest pitch inside a frame.
+    frame_length = 1 << int(np.ceil(np.log2(2 * sample_rate / F0_MIN + 2)))
+    silence_level = SILENCE_THRESHOLD * float(np.abs(audio).max())
+    # Pitch frame j is centred on sample j * hop. YIN is run block by block on slices of the
+    # zero-padded signal, which keeps memory bounded on long recordings.
+    padded = np.pad(audio, frame_length // 2)
+    n_pitch_frames = 1 + audio.size // hop
+    f0 = np.empty(n_pitch_frames)
+    voiced = np.empty(n_pitch_frames, dtype=bool)
+    for first in range(0, n_pitch_frames, _FRAMES_PER_BLOCK):
+        last = min(first + _FRAMES_PER_BLOCK, n_pitch_frames)
+        segment = padded[first * hop : (last - 1) * hop + frame_length]
+        f0[first:last] = librosa.yin(
+            segment,
+            fmin=F0_MIN,
+            fmax=F0_MAX,
+            sr=sample_rate,
+            frame_length=frame_length,
+            hop_length=hop,
+            center=False,
+        )
+        frames = librosa.util.frame(segment, frame_length=frame_length, hop_length=hop, axis=0)
+        periods = np.rint(sample_rate / f0[first:last]).astype(np.int64)
+        voiced[first:last] = (_periodicity(frames, periods) >= VOICING_THRESHOLD) & (
+            np.abs(frames).max(axis=1) >= silence_level
+        )
+
+    pitch_frame = np.arange(n_pitch_frames)
+    if voiced.any():
+        log_f0 = np.interp(pitch_frame, pitch_frame[voiced], np.log(f0[voiced]))
+    else:
+        log_f0 = np.full(n_pitch_frames, np.log(F0_MIN))
+    motion_frame = pitch_frame * hop * fps // sample_rate  # the frame holding each centre
+    inside = motion_frame < n_frames
+    totals = np.bincount(motion_frame[inside], weights=log_f0[inside], minlength=n_frames)
+    counts = np.bincount(motion_frame[inside], minlength=n_frames)
+    return totals / counts  # every motion frame holds >= PITCH_FRAMES_PER_FRAME pitch frames
+
+
+def _periodicity(frames: np.ndarray, periods: np.ndarray) -> np.ndarray:
+    """Correlation ``(F,)`` of each frame ``(F, L)`` with itself shifted by its period ``(F,)``.
+
+    1 for a perfectly periodic frame, near 0 for noise; 0 for an all-zero frame.
+    """
+    frame_length = frames.shape[1]
+    offsets = np.arange(frame_length)
+    periods = periods[:, None]
+    overlap = offsets < frame_length - periods  # samples n with n + period inside the frame
+    later = np.take_along_axis(frames, np.minimum(offsets + periods, frame_length - 1), axis=1)
+    head = np.where(overlap, frames, 0.0)
+    tail = np.where(overlap, later, 0.0)
+    norms = np.sqrt((head * head).sum(axis=1) * (tail * tail).sum(axis=1))
+    return (head * tail).sum(axis=1) / np.maximum(norms, np.finfo(np.float32).tiny)
+
+
+# --------------------------------------------------------------------------- speech activity
+
+
+def activity_one_hot(codes: np.ndarray) -> np.ndarray:
+    """Activity codes ``(T,)`` (integers 0..3, see :class:`Activity`) -> one-hot ``(T, 4)`` float32."""
+    codes = np.asarray(codes)
+    if codes.ndim != 1:
+        raise ValueError(f"activity codes must have shape (T,), got {codes.shape}")
+    if codes.dtype.kind not in "iu":
+        raise ValueError(
+            f"activity codes must be integers, got dtype {codes.dtype}; {_VALID_CODES}"
+        )
+    invalid = (codes < 0) | (codes >= len(Activity))
+    if invalid.any():
+        bad = np.unique(codes[invalid])[:5].tolist()
+        raise ValueError(f"invalid activity codes {bad}; {_VALID_CODES}")
+    return np.eye(len(Activity), dtype=np.float32)[codes]
+
+
+def activity_from_one_hot(one_hot: np.ndarray) -> np.ndarray:
+    """One-hot activity ``(T, 4)`` -> codes ``(T,)`` int64; the inverse of :func:`activity_one_hot`.
+
+    Every row must hold a single 1 and zeros elsewhere; for probabilities, take
+    ``probabilities.argmax(axis=-1)`` instead.
+    """
+    one_hot = np.asarray(one_hot)
+    if one_hot.ndim != 2 or one_hot.shape[1] != len(Activity):
+        raise ValueError(
+            f"one-hot activity must have shape (T, {len(Activity)}), got {one_hot.shape}; "
+            f"{_VALID_CODES}"
+        )
+    if one_hot.dtype.kind not in "biuf":
+        raise ValueError(f"one-hot activity must be numeric, got dtype {one_hot.dtype}")
+    is_one_hot = np.isin(one_hot, (0, 1)).all(axis=1) & (one_hot.sum(axis=1) == 1)
+    if not is_one_hot.all():
+        row = int(np.flatnonzero(~is_one_hot)[0])
+        raise ValueError(
+            f"row {row} of the one-hot activity is {one_hot[row].tolist()}, not a single 1 among "
+            "zeros; for probabilities use .argmax(axis=-1)"
+        )
+    return one_hot.argmax(axis=1).astype(np.int64)
+
+
+_VALID_CODES = "valid codes: " + ", ".join(
+    f"{member.value} = {member.name} ({member.label})" for member in Activity
+)
+
+
+# --------------------------------------------------------------------------- input checks
+
+
+def _check_positive_int(value, name: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+
+
+def _check_signal(audio, name: str) -> np.ndarray:
+    """A finite, non-empty, 1-D real signal as float32 ``(n,)``; AudioError otherwise."""
+    audio = np.asarray(audio)
+    if audio.dtype.kind not in "iuf":
+        raise AudioError(f"{name} must be a real-valued signal, got dtype {audio.dtype}")
+    if audio.ndim != 1:
+        raise AudioError(
+            f"{name} must be a mono signal of shape (n,), got shape {audio.shape}; "
+            "down-mix channels first (load_audio does)"
+        )
+    if audio.size == 0:
+        raise AudioError(f"{name} is empty (0 samples)")
+    not_finite = ~np.isfinite(audio)
+    if not_finite.any():
+        raise AudioError(f"{name} has {int(not_finite.sum())} NaN or infinite samples")
+    return audio.astype(np.float32, copy=False)
+
+
+def _check_features_input(audio, sample_rate: int, fps: int) -> tuple[np.ndarray, int]:
+    """Validate a signal for feature extraction; return it as float32 and its frame count T."""
+    audio = _check_signal(audio, "audio")
+    n_frames = num_frames(audio.size, sample_rate, fps)
+    if sample_rate < 2 * fps:
+        raise ValueError(
+            f"sample_rate={sample_rate} Hz is too low for {fps} fps (< 2 samples a frame)"
+        )
+    if n_frames == 0:
+        raise AudioError(
+            f"audio of {audio.size} samples ({audio.size / sample_rate * 1000:.1f} ms at "
+            f"{sample_rate} Hz) is shorter than one motion frame ({1000 / fps:.1f} ms at {fps} fps)"
+        )
+    return audio, n_frames

@@ -1,0 +1,436 @@
+"""Tests for gesturelib.features: audio loading/saving, frame-aligned speech features, activity."""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import numpy as np
+import pytest
+import scipy.fft
+import scipy.signal
+import soundfile
+
+from gesturelib import features
+from gesturelib.conventions import Activity
+from gesturelib.features import (
+    MEL_FLOOR,
+    PROSODY_FEATURES,
+    AudioError,
+    activity_from_one_hot,
+    activity_one_hot,
+    load_audio,
+    mel_spectrogram,
+    mfcc,
+    num_frames,
+    prosody,
+    save_audio,
+)
+
+LOG_ENERGY, LOG_F0, D_LOG_ENERGY, D_LOG_F0 = range(4)
+
+
+def sine(frequency, seconds, sample_rate, amplitude=0.5):
+    t = np.arange(round(seconds * sample_rate)) / sample_rate
+    return (amplitude * np.sin(2 * np.pi * frequency * t)).astype(np.float32)
+
+
+def peak_frequency(audio, sample_rate):
+    spectrum = np.abs(np.fft.rfft(audio * np.hanning(audio.size)))
+    return np.fft.rfftfreq(audio.size, 1 / sample_rate)[spectrum.argmax()]
+
+
+# --------------------------------------------------------------------------- load_audio
+
+
+@pytest.mark.parametrize(
+    ("subtype", "tolerance"),
+    [
+        ("PCM_U8", 2**-7),
+        ("PCM_16", 2**-15),
+        ("PCM_24", 2**-23),
+        ("PCM_32", 1e-6),
+        ("FLOAT", 0.0),
+        ("DOUBLE", 1e-7),
+    ],
+)
+def test_load_audio_reads_every_wav_sample_format(tmp_path, subtype, tolerance):
+    original = sine(440, 0.25, 16000)
+    path = tmp_path / f"{subtype}.wav"
+    soundfile.write(path, original, 16000, subtype=subtype)
+    audio, rate = load_audio(path)
+    assert rate == 16000
+    assert audio.dtype == np.float32 and audio.shape == original.shape
+    np.testing.assert_allclose(audio, original, atol=tolerance + 1e-7)
+
+
+def test_load_audio_averages_stereo_channels(tmp_path):
+    left, right = sine(440, 0.25, 16000, 0.6), sine(1000, 0.25, 16000, 0.2)
+    path = tmp_path / "stereo.wav"
+    soundfile.write(path, np.stack([left, right], axis=1), 16000, subtype="FLOAT")
+    audio, _ = load_audio(path)
+    assert audio.ndim == 1
+    np.testing.assert_allclose(audio, (left + right) / 2, atol=1e-7)
+
+
+@pytest.mark.parametrize("file_rate", [8000, 11025, 22050, 44100])
+def test_load_audio_resamples_keeping_length_and_pitch(tmp_path, file_rate):
+    path = tmp_path / "tone.wav"
+    original = sine(440, 0.9, file_rate)
+    soundfile.write(path, original, file_rate, subtype="PCM_16")
+    audio, rate = load_audio(path, sample_rate=16000)
+    assert rate == 16000 and audio.dtype == np.float32
+    assert audio.size == int(np.ceil(original.size * 16000 / file_rate))
+    assert abs(peak_frequency(audio, rate) - 440) <= 2
+    assert np.abs(audio).max() <= 1.0
+
+
+def test_load_audio_keeps_the_file_rate_when_asked(tmp_path):
+    path = tmp_path / "tone.wav"
+    soundfile.write(path, sine(440, 0.5, 22050), 22050)
+    audio, rate = load_audio(path, sample_rate=None)
+    assert rate == 22050 and audio.size == 11025
+
+
+def test_load_audio_reads_flac(tmp_path):
+    original = sine(440, 0.25, 16000)
+    path = tmp_path / "tone.flac"
+    soundfile.write(path, original, 16000, subtype="PCM_16")
+    audio, _ = load_audio(path)
+    np.testing.assert_allclose(audio, original, atol=2**-15)
+
+
+def test_load_audio_scales_float_files_louder_than_full_scale(tmp_path):
+    path = tmp_path / "loud.wav"
+    soundfile.write(path, 2 * sine(440, 0.25, 16000, 1.0), 16000, subtype="FLOAT")
+    with pytest.warns(UserWarning, match="beyond"):
+        audio, _ = load_audio(path)
+    assert np.abs(audio).max() == pytest.approx(1.0)
+
+
+def test_load_audio_missing_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothing.wav"):
+        load_audio(tmp_path / "nothing.wav")
+
+
+def test_load_audio_directory(tmp_path):
+    folder = tmp_path / "folder.wav"
+    folder.mkdir()
+    with pytest.raises(AudioError, match="folder.wav is a directory"):
+        load_audio(folder)
+
+
+def test_load_audio_empty_file(tmp_path):
+    path = tmp_path / "empty.wav"
+    path.touch()
+    with pytest.raises(AudioError, match=r"empty.wav is an empty file \(0 bytes\)"):
+        load_audio(path)
+
+
+def test_load_audio_text_file_renamed_wav(tmp_path):
+    path = tmp_path / "notes.wav"
+    path.write_text("these are my notes, not a recording\n")
+    with pytest.raises(AudioError, match="notes.wav could not be read as audio"):
+        load_audio(path)
+
+
+def test_load_audio_file_without_samples(tmp_path):
+    path = tmp_path / "header_only.wav"
+    soundfile.write(path, np.zeros(0), 16000)
+    with pytest.raises(AudioError, match="header_only.wav contains no samples"):
+        load_audio(path)
+
+
+def test_load_audio_all_nan(tmp_path):
+    path = tmp_path / "nan.wav"
+    soundfile.write(path, np.full(1600, np.nan), 16000, subtype="FLOAT")
+    with pytest.raises(AudioError, match="nan.wav: every sample is NaN"):
+        load_audio(path)
+
+
+def test_load_audio_some_infinite_samples(tmp_path):
+    signal = sine(440, 0.1, 16000)
+    signal[[10, 20]] = np.inf
+    path = tmp_path / "inf.wav"
+    soundfile.write(path, signal, 16000, subtype="FLOAT")
+    with pytest.raises(AudioError, match="inf.wav: 2 of 1600 samples are NaN or infinite"):
+        load_audio(path)
+
+
+# --------------------------------------------------------------------------- save_audio
+
+
+def test_save_audio_round_trip_as_16_bit_pcm(tmp_path):
+    original = sine(440, 0.25, 22050)
+    path = tmp_path / "out.wav"
+    save_audio(path, original, 22050)
+    info = soundfile.info(path)
+    assert info.subtype == "PCM_16" and info.samplerate == 22050 and info.channels == 1
+    audio, rate = load_audio(path, sample_rate=None)
+    assert rate == 22050
+    np.testing.assert_allclose(audio, original, atol=2**-15)
+
+
+def test_save_audio_clips_to_full_scale(tmp_path):
+    path = tmp_path / "loud.wav"
+    save_audio(path, np.array([1.5, -2.0, 0.25]), 16000)
+    audio, _ = load_audio(path)
+    np.testing.assert_allclose(audio, [1.0, -1.0, 0.25], atol=2**-15)
+
+
+def test_save_audio_refuses_to_overwrite(tmp_path):
+    path = tmp_path / "take.wav"
+    save_audio(path, sine(440, 0.1, 16000), 16000)
+    before = path.read_bytes()
+    with pytest.raises(FileExistsError, match="take.wav already exists; pass overwrite=True"):
+        save_audio(path, sine(880, 0.1, 16000), 16000)
+    assert path.read_bytes() == before
+    save_audio(path, sine(880, 0.1, 16000), 16000, overwrite=True)
+    assert path.read_bytes() != before
+
+
+@pytest.mark.parametrize(
+    ("audio", "message"),
+    [
+        (np.zeros((100, 2)), r"shape \(n,\), got shape \(100, 2\)"),
+        (np.array([0.1, np.nan]), "1 NaN or infinite"),
+        (np.zeros(0), "empty"),
+    ],
+)
+def test_save_audio_rejects_bad_signals(tmp_path, audio, message):
+    with pytest.raises(AudioError, match=message):
+        save_audio(tmp_path / "bad.wav", audio, 16000)
+    assert not (tmp_path / "bad.wav").exists()
+
+
+def test_save_audio_rejects_other_extensions_and_missing_folders(tmp_path):
+    with pytest.raises(ValueError, match=r"should end in \.wav"):
+        save_audio(tmp_path / "out.mp3", sine(440, 0.1, 16000), 16000)
+    with pytest.raises(FileNotFoundError, match="the folder .*missing does not exist"):
+        save_audio(tmp_path / "missing" / "out.wav", sine(440, 0.1, 16000), 16000)
+
+
+# --------------------------------------------------------------------------- frame counts
+
+
+RATES_AND_FPS = [(rate, fps) for rate in (8000, 16000, 22050, 44100, 11025) for fps in (25, 30)]
+RATES_AND_FPS += [(44100, 60), (16000, 60)]
+
+
+@pytest.mark.parametrize(("sample_rate", "fps"), RATES_AND_FPS)
+def test_every_feature_has_one_row_per_whole_motion_frame(sample_rate, fps):
+    rng = np.random.default_rng(0)
+    for seconds in (1 / fps, 0.5, 17 / fps, 0.7 + 0.3 / fps, 1.2345):
+        n = int(round(seconds * sample_rate))
+        for n_samples in (n - 1, n, n + 1):
+            expected = math.floor(Fraction(n_samples, sample_rate) * fps)  # exact rationals
+            if expected == 0:
+                continue
+            audio = 0.1 * rng.standard_normal(n_samples).astype(np.float32)
+            assert num_frames(n_samples, sample_rate, fps) == expected
+            mel = mel_spectrogram(audio, sample_rate, fps)
+            assert mel.shape == (expected, 27) and mel.dtype == np.float32
+            assert mfcc(audio, sample_rate, fps).shape == (expected, 13)
+            prosodic = prosody(audio, sample_rate, fps)
+            assert prosodic.shape == (expected, len(PROSODY_FEATURES))
+            assert np.isfinite(prosodic).all() and np.isfinite(mel).all()
+
+
+def test_exact_frame_boundaries_for_fractional_frame_lengths():
+    # 8000 Hz at 30 fps: 266.67 samples a frame, so 800 samples are exactly 3 frames.
+    assert num_frames(800, 8000, 30) == 3
+    assert num_frames(799, 8000, 30) == 2
+    assert mel_spectrogram(np.zeros(800), 8000, 30).shape == (3, 27)
+    assert mel_spectrogram(np.zeros(799), 8000, 30).shape == (2, 27)
+    # 22050 Hz at 30 fps: 735 samples a frame.
+    assert num_frames(735 * 7, 22050, 30) == 7
+    assert num_frames(735 * 7 - 1, 22050, 30) == 6
+
+
+# --------------------------------------------------------------------------- alignment
+
+
+@pytest.mark.parametrize(
+    ("sample_rate", "fps"), [(16000, 25), (22050, 30), (8000, 30), (11025, 25)]
+)
+@pytest.mark.parametrize("frame", [0, 7, 1499])
+def test_a_click_inside_frame_t_lights_up_row_t(sample_rate, fps, frame):
+    n_frames = 1500  # a minute at 25 fps: any drift of the frame grid would show by the end
+    audio = np.zeros(int(np.ceil(n_frames * sample_rate / fps)), dtype=np.float32)
+    click = int((frame + 0.5) * sample_rate / fps)
+    audio[click : click + 3] = 0.9
+    mel = mel_spectrogram(audio, sample_rate, fps)
+    assert mel.shape[0] == n_frames
+    loudness = mel.sum(axis=1)
+    assert loudness.argmax() == frame
+    far = np.abs(np.arange(n_frames) - frame) >= 2
+    np.testing.assert_allclose(mel[far], np.log(MEL_FLOOR), rtol=1e-6)
+    energy = prosody(audio[: 2 * click + 10], sample_rate, fps)[:, LOG_ENERGY]
+    assert energy.argmax() == frame
+
+
+@pytest.mark.parametrize(("sample_rate", "fps"), [(16000, 25), (22050, 30), (11025, 25)])
+def test_a_tone_burst_filling_frame_t_is_seen_in_row_t_only(sample_rate, fps):
+    frame, n_frames = 11, 20
+    audio = np.zeros(n_frames * sample_rate // fps + 1, dtype=np.float32)
+    start, end = round(frame * sample_rate / fps), round((frame + 1) * sample_rate / fps)
+    audio[start:end] = sine(1000, 1.0, sample_rate)[: end - start]
+    mel = mel_spectrogram(audio, sample_rate, fps)
+    energy = prosody(audio, sample_rate, fps)[:, LOG_ENERGY]
+    for feature in (mel.max(axis=1), energy):
+        assert feature.argmax() == frame
+        others = np.delete(feature, frame)
+        assert feature[frame] > others.max() + 10  # e^10: orders of magnitude louder
+
+
+def test_mel_matches_librosa_where_the_hop_is_a_whole_number_of_samples():
+    import librosa
+
+    sample_rate, fps, window = 16000, 25, 640
+    audio = np.random.default_rng(1).standard_normal(sample_rate).astype(np.float32)
+    ours = mel_spectrogram(audio, sample_rate, fps)
+    # librosa centres a 640-sample window in each 1024-sample FFT frame; shift the signal so that
+    # its windows start where ours do (0, 640, 1280, ...). Zero-padding does not change the power.
+    offset = (1024 - window) // 2
+    shifted = np.pad(audio, (offset, 1024))
+    power = librosa.feature.melspectrogram(
+        y=shifted,
+        sr=sample_rate,
+        n_fft=1024,
+        hop_length=window,
+        win_length=window,
+        center=False,
+        n_mels=27,
+    )[:, : ours.shape[0]]
+    np.testing.assert_allclose(ours, np.log(power.T + MEL_FLOOR), rtol=1e-4, atol=1e-4)
+
+
+# --------------------------------------------------------------------------- feature values
+
+
+def test_silence_gives_finite_features():
+    silence = np.zeros(16000, dtype=np.float32)
+    mel = mel_spectrogram(silence, 16000)
+    np.testing.assert_allclose(mel, np.log(MEL_FLOOR), rtol=1e-6)
+    assert np.isfinite(mfcc(silence, 16000)).all()
+    prosodic = prosody(silence, 16000)
+    assert np.isfinite(prosodic).all()
+    np.testing.assert_allclose(prosodic[:, LOG_F0], np.log(features.F0_MIN), rtol=1e-6)
+    np.testing.assert_array_equal(prosodic[:, [D_LOG_ENERGY, D_LOG_F0]], 0.0)
+
+
+def test_louder_signal_has_higher_log_energy_by_the_log_power_ratio():
+    noise = np.random.default_rng(2).standard_normal(16000).astype(np.float32)
+    quiet, loud = prosody(0.05 * noise, 16000), prosody(0.2 * noise, 16000)
+    np.testing.assert_allclose(loud[:, LOG_ENERGY] - quiet[:, LOG_ENERGY], np.log(16), rtol=1e-4)
+    assert (mel_spectrogram(0.2 * noise, 16000) > mel_spectrogram(0.05 * noise, 16000)).all()
+
+
+@pytest.mark.parametrize(("frequency", "sample_rate"), [(120, 16000), (220, 22050), (400, 8000)])
+def test_log_f0_of_a_sine_is_log_of_its_frequency(frequency, sample_rate):
+    prosodic = prosody(sine(frequency, 1.0, sample_rate), sample_rate)
+    np.testing.assert_allclose(prosodic[:, LOG_F0], np.log(frequency), atol=0.01)
+    assert np.abs(prosodic[2:-2, D_LOG_F0]).max() < 0.1
+
+
+def test_rising_chirp_gives_the_right_positive_d_log_f0():
+    sample_rate, seconds = 16000, 2.0
+    t = np.arange(int(seconds * sample_rate)) / sample_rate
+    # F0 doubles from 150 to 300 Hz in 2 s: d log F0 / dt = log(2) / 2 per second.
+    chirp = 0.5 * scipy.signal.chirp(t, 150, seconds, 300, method="logarithmic")
+    prosodic = prosody(chirp.astype(np.float32), sample_rate)
+    centres = (np.arange(prosodic.shape[0]) + 0.5) / 25
+    np.testing.assert_allclose(prosodic[:, LOG_F0], np.log(150 * 2 ** (centres / 2)), atol=0.02)
+    interior = prosodic[2:-2, D_LOG_F0]
+    assert (interior > 0).all()
+    assert np.median(interior) == pytest.approx(np.log(2) / 2, rel=0.1)
+
+
+def test_log_f0_is_interpolated_across_unvoiced_gaps_without_spikes():
+    sample_rate = 16000
+    tone, gap = sine(200, 0.4, sample_rate), np.zeros(int(0.4 * sample_rate), np.float32)
+    noise = 0.3 * np.random.default_rng(3).standard_normal(gap.size).astype(np.float32)
+    for unvoiced in (gap, noise):
+        prosodic = prosody(np.concatenate([tone, unvoiced, tone]), sample_rate)
+        np.testing.assert_allclose(prosodic[:, LOG_F0], np.log(200), atol=0.03)
+        assert np.abs(prosodic[:, D_LOG_F0]).max() < 0.5  # a voicing spike would be ~100/s
+
+
+def test_noise_alone_is_unvoiced():
+    noise = 0.3 * np.random.default_rng(4).standard_normal(16000).astype(np.float32)
+    np.testing.assert_allclose(prosody(noise, 16000)[:, LOG_F0], np.log(features.F0_MIN))
+
+
+def test_mfcc_is_the_dct_of_the_log_mel():
+    audio = np.random.default_rng(5).standard_normal(8000).astype(np.float32)
+    expected = scipy.fft.dct(mel_spectrogram(audio, 16000), type=2, norm="ortho", axis=1)[:, :13]
+    np.testing.assert_allclose(mfcc(audio, 16000), expected, rtol=1e-4, atol=1e-4)
+    with pytest.raises(ValueError, match="n_mfcc=30 cannot exceed n_mels=27"):
+        mfcc(audio, 16000, n_mfcc=30)
+
+
+# --------------------------------------------------------------------------- bad feature input
+
+
+@pytest.mark.parametrize("extract", [mel_spectrogram, mfcc, prosody])
+@pytest.mark.parametrize(
+    ("audio", "error", "message"),
+    [
+        (np.zeros((16000, 2)), AudioError, r"shape \(n,\), got shape \(16000, 2\)"),
+        (np.r_[np.zeros(1000), np.nan, np.inf], AudioError, "2 NaN or infinite samples"),
+        (np.zeros(0), AudioError, "empty"),
+        (np.zeros(639), AudioError, "shorter than one motion frame"),
+        (np.zeros(1000, dtype=complex), AudioError, "real-valued"),
+    ],
+)
+def test_features_reject_bad_audio(extract, audio, error, message):
+    with pytest.raises(error, match=message):
+        extract(audio, 16000)
+
+
+def test_features_reject_non_integer_rates():
+    with pytest.raises(ValueError, match="fps must be a positive integer, got 29.97"):
+        mel_spectrogram(np.zeros(16000), 16000, fps=29.97)
+    with pytest.raises(ValueError, match="sample_rate must be a positive integer"):
+        mel_spectrogram(np.zeros(16000), -16000)
+    with pytest.raises(AudioError, match="prosody needs sample_rate >= 1200"):
+        prosody(np.zeros(1000), 1000)
+
+
+# --------------------------------------------------------------------------- speech activity
+
+
+def test_activity_one_hot_round_trip():
+    codes = np.array([0, 1, 2, 3, 3, 0], dtype=np.int32)
+    one_hot = activity_one_hot(codes)
+    assert one_hot.shape == (6, 4) and one_hot.dtype == np.float32
+    np.testing.assert_array_equal(one_hot.sum(axis=1), 1.0)
+    assert one_hot[0, Activity.A_SPEAKS] == 1 and one_hot[2, Activity.BOTH] == 1
+    back = activity_from_one_hot(one_hot)
+    assert back.dtype == np.int64
+    np.testing.assert_array_equal(back, codes)
+
+
+@pytest.mark.parametrize(
+    ("codes", "message"),
+    [
+        (np.array([0.0, 1.0]), "must be integers, got dtype float64"),
+        (np.array([0, 4]), r"invalid activity codes \[4\]"),
+        (np.array([-1, 2]), r"invalid activity codes \[-1\]"),
+        (np.zeros((5, 1), dtype=int), r"shape \(T,\), got \(5, 1\)"),
+    ],
+)
+def test_activity_one_hot_rejects_bad_codes(codes, message):
+    with pytest.raises(ValueError, match=message) as caught:
+        activity_one_hot(codes)
+    if "shape" not in message:
+        assert "0 = A_SPEAKS (A speaks)" in str(caught.value)
+        assert "3 = NONE (none)" in str(caught.value)
+
+
+def test_activity_from_one_hot_rejects_non_one_hot_rows():
+    with pytest.raises(ValueError, match=r"shape \(T, 4\), got \(3, 3\)"):
+        activity_from_one_hot(np.eye(3))
+    soft = np.array([[1, 0, 0, 0], [0.7, 0.3, 0, 0]])
+    with pytest.raises(ValueError, match="row 1 .* not a single 1"):
+        activity_from_one_hot(soft)
