@@ -34,12 +34,14 @@ def quick_mode() -> bool:
     )
 
 
-def seed_everything(seed: int) -> torch.Generator:
-    """Seed Python, NumPy and PyTorch's global generators; return a fresh ``torch.Generator``.
+def seed_everything(seed: int) -> tuple[np.random.Generator, torch.Generator]:
+    """Seed Python's, NumPy's and PyTorch's global generators, for a notebook's own cells.
 
-    Library functions take explicit generators; this is for the notebook's own cells.
+    Library functions take explicit generators; this returns a fresh pair for that:
+    ``rng, generator = seed_everything(0)``. The global ones are seeded as well because
+    ``torch.nn`` draws initial weights from PyTorch's global generator.
     """
     random.seed(seed)
-    np.random.seed(seed)
+    np.random.seed(seed)  # noqa: NPY002 - third-party code may draw from NumPy's global generator
     torch.manual_seed(seed)
-    return torch.Generator().manual_seed(seed)
+    return np.random.default_rng(seed), torch.Generator().manual_seed(seed)

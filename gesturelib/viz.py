@@ -1,0 +1,386 @@
+"""Pictures, animations and sound: how a person looks at poses, motion and speech.
+
+* :func:`plot_pose` draws a stick figure from the front and from the side.
+* :func:`animate` makes a matplotlib animation of one or more motions side by side;
+  :func:`animation_html` embeds it in a notebook (``FuncAnimation.to_jshtml``: no ffmpeg needed)
+  and :func:`save_animation` writes it to a file: MP4 with the speech muxed in when an ffmpeg
+  binary is available (the ``imageio-ffmpeg`` dependency ships one), a silent GIF otherwise.
+* :func:`plot_timeline` shows a mel spectrogram with who is talking underneath.
+* :func:`audio_player` plays audio in a notebook.
+
+Views: the agent faces +z with y up, so the *front* view (x horizontal, y up) shows the agent as a
+person facing you: its left hand (+x) on your right. The *side* view (z horizontal, y up) shows the
+agent facing right.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib import animation
+from matplotlib.colors import ListedColormap
+from matplotlib.patches import Patch
+
+from gesturelib.conventions import FPS, Activity
+from gesturelib.rotations import check_trailing_shape
+from gesturelib.skeleton import BONES, KEYPOINTS, NUM_JOINTS
+
+#: Which coordinates each view puts on its horizontal and vertical axes.
+VIEWS = {"front": (0, 1), "side": (2, 1)}
+ACTIVITY_COLOURS = {
+    Activity.A_SPEAKS: "#d95f02",
+    Activity.B_SPEAKS: "#1b9e77",
+    Activity.BOTH: "#7570b3",
+    Activity.NONE: "#e6e6e6",
+}
+
+
+def _bone_colour(child: int) -> str:
+    name = KEYPOINTS[child]
+    if name.startswith("left_"):
+        return "#1f77b4"
+    if name.startswith("right_"):
+        return "#d62728"
+    return "#444444"
+
+
+def _with_root(positions: np.ndarray) -> np.ndarray:
+    """Append the root (origin) as joint index -1, so BONES can index it directly."""
+    root = np.zeros((*positions.shape[:-2], 1, 3), dtype=positions.dtype)
+    return np.concatenate([positions, root], axis=-2)
+
+
+def _as_motion(positions, name: str = "positions") -> np.ndarray:
+    positions = np.asarray(positions, dtype=float)
+    check_trailing_shape(positions, (NUM_JOINTS, 3), name)
+    if not np.isfinite(positions).all():
+        raise ValueError(f"{name} contains NaN or infinite values; cannot draw them")
+    return positions
+
+
+def _axis_limits(positions: np.ndarray, view: str, margin: float = 10.0):
+    horizontal, vertical = VIEWS[view]
+    points = _with_root(positions).reshape(-1, 3)
+    low, high = points.min(0) - margin, points.max(0) + margin
+    # Square axes centred on the body so that proportions are true.
+    centre = (low + high) / 2
+    half = max(high[horizontal] - low[horizontal], high[vertical] - low[vertical]) / 2
+    return (
+        (centre[horizontal] - half, centre[horizontal] + half),
+        (centre[vertical] - half, centre[vertical] + half),
+    )
+
+
+def _skeleton_lines(ax, view: str, **line_style) -> list:
+    """One ``Line2D`` per bone, empty; :func:`_update_lines` fills them with a pose."""
+    style = {"linewidth": 3, "marker": "o", "markersize": 3, **line_style}
+    return [ax.plot([], [], color=_bone_colour(child), **style)[0] for _, child in BONES]
+
+
+def _update_lines(lines: list, pose: np.ndarray, view: str) -> list:
+    horizontal, vertical = VIEWS[view]
+    points = _with_root(pose)
+    for line, (parent, child) in zip(lines, BONES, strict=True):
+        line.set_data(points[[parent, child], horizontal], points[[parent, child], vertical])
+    return lines
+
+
+def _style_axis(ax, view: str, limits) -> None:
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (cm)" if view == "front" else "z (cm, forward)")
+    ax.set_ylabel("y (cm)")
+    ax.set_title(f"{view} view", fontsize=9)
+    ax.grid(alpha=0.3)
+
+
+def _style_animation_axis(ax, view: str, limits) -> None:
+    """Like :func:`_style_axis` but without ticks, which cost most of the time of each frame."""
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    ax.set_title(f"{view} view", fontsize=9)
+    # A 50 cm scale bar in the lower left corner instead of axes.
+    x0, y0 = limits[0][0] + 5, limits[1][0] + 5
+    ax.plot([x0, x0 + 50], [y0, y0], color="0.5", linewidth=1)
+    ax.text(x0 + 25, y0 + 2, "50 cm", ha="center", va="bottom", fontsize=7, color="0.4")
+
+
+def plot_pose(
+    positions, views: Sequence[str] = ("front", "side"), axes=None, title=None, **line_style
+):
+    """Draw one pose, or several overlaid, as stick figures.
+
+    Args:
+        positions: ``(9, 3)`` one pose, or ``(N, 9, 3)`` poses drawn on top of each other (lighter),
+            in cm.
+        views: which of ``"front"`` and ``"side"`` to draw, one axis each.
+        axes: existing matplotlib axes, one per view; a new figure is made when omitted.
+        title: figure title.
+        **line_style: passed to ``Axes.plot`` (e.g. ``alpha``, ``linewidth``).
+    Returns:
+        The matplotlib ``Figure``.
+    """
+    positions = _as_motion(positions)
+    poses = positions.reshape(-1, NUM_JOINTS, 3)
+    unknown = set(views) - set(VIEWS)
+    if unknown:
+        raise ValueError(f"unknown view(s) {sorted(unknown)}; choose from {sorted(VIEWS)}")
+    if axes is None:
+        fig, axes = plt.subplots(1, len(views), figsize=(3.2 * len(views), 3.4), squeeze=False)
+        axes = axes[0]
+    fig = axes[0].figure
+    alpha = line_style.pop("alpha", 1.0 if len(poses) == 1 else max(0.08, 3.0 / len(poses)))
+    for ax, view in zip(axes, views, strict=True):
+        for pose in poses:
+            _update_lines(_skeleton_lines(ax, view, alpha=alpha, **line_style), pose, view)
+        _style_axis(ax, view, _axis_limits(poses, view))
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def animate(
+    motions,
+    fps: float = FPS,
+    titles: Sequence[str] | None = None,
+    views: Sequence[str] = ("front", "side"),
+    stride: int = 1,
+    dpi: int = 72,
+):
+    """Animate one motion, or several side by side (e.g. ground truth and a model's sample).
+
+    Args:
+        motions: ``(T, 9, 3)`` positions in cm, or a list of such arrays (same ``T``).
+        fps: frame rate of the motions.
+        titles: one title per motion.
+        views: the views to show for each motion.
+        stride: draw every ``stride``-th frame (the playback speed stays real time); use it to
+            keep notebook animations light.
+        dpi: resolution of the rendered frames.
+    Returns:
+        A ``matplotlib.animation.FuncAnimation``; the figure is closed so that notebooks show only
+        the animation, via :func:`animation_html`.
+    """
+    if isinstance(motions, np.ndarray) and motions.ndim == 3:
+        motions = [motions]
+    motions = [_as_motion(m, f"motions[{i}]") for i, m in enumerate(motions)]
+    lengths = {len(m) for m in motions}
+    if len(lengths) != 1:
+        raise ValueError(
+            f"motions to animate side by side must have the same length, got {sorted(lengths)}"
+        )
+    if titles is not None and len(titles) != len(motions):
+        raise ValueError(f"got {len(titles)} titles for {len(motions)} motions")
+    if stride < 1:
+        raise ValueError(f"stride must be a positive integer, got {stride}")
+    if fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps}")
+
+    n_frames = lengths.pop()
+    fig, axes = plt.subplots(
+        1,
+        len(motions) * len(views),
+        figsize=(2.6 * len(motions) * len(views), 3.0),
+        squeeze=False,
+        dpi=dpi,
+    )
+    axes = axes[0]
+    panels = []  # (lines, motion, view)
+    for i, motion in enumerate(motions):
+        for j, view in enumerate(views):
+            ax = axes[i * len(views) + j]
+            _style_animation_axis(ax, view, _axis_limits(motion, view))
+            if titles is not None and j == 0:
+                ax.set_title(f"{titles[i]}\n{view} view", fontsize=9)
+            panels.append((_skeleton_lines(ax, view), motion, view))
+    clock = fig.text(0.01, 0.01, "", fontsize=8)
+    fig.tight_layout()
+
+    def draw(frame: int):
+        artists = [clock]
+        for lines, motion, view in panels:
+            artists += _update_lines(lines, motion[frame], view)
+        clock.set_text(f"t = {frame / fps:5.2f} s")
+        return artists
+
+    anim = animation.FuncAnimation(
+        fig, draw, frames=range(0, n_frames, stride), interval=1000.0 * stride / fps, blit=True
+    )
+    plt.close(fig)
+    return anim
+
+
+def animation_html(anim) -> str:
+    """HTML with a JavaScript player for ``anim`` (``IPython.display.HTML(...)`` shows it)."""
+    return anim.to_jshtml(default_mode="once")
+
+
+def ffmpeg_executable() -> str | None:
+    """Path of an ffmpeg binary: the one shipped with ``imageio-ffmpeg``, else one on the PATH."""
+    try:
+        import imageio_ffmpeg
+
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError):
+        return shutil.which("ffmpeg")
+
+
+def save_animation(
+    anim,
+    path,
+    fps: float = FPS,
+    audio=None,
+    sample_rate: int | None = None,
+    overwrite: bool = False,
+) -> Path:
+    """Write an animation to a file that any player opens.
+
+    Args:
+        anim: from :func:`animate` (made with the same ``stride`` you want to see; ``fps`` is
+            the motion's frame rate, the file plays in real time).
+        path: ``.mp4`` or ``.gif``. An MP4 needs ffmpeg (see :func:`ffmpeg_executable`); without it
+            the animation is written as a GIF next to ``path`` instead, without sound.
+        audio: optional mono float audio ``(N,)`` to mux into the MP4, starting at frame 0.
+        sample_rate: the audio's sample rate (required with ``audio``).
+        overwrite: replace an existing file; otherwise an existing file raises ``FileExistsError``.
+    Returns:
+        The path actually written.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in {".mp4", ".gif"}:
+        raise ValueError(f"save_animation writes .mp4 or .gif files, got {path.name!r}")
+    if audio is not None and sample_rate is None:
+        raise ValueError("sample_rate is required when audio is given")
+    ffmpeg = ffmpeg_executable()
+    if path.suffix.lower() == ".mp4" and ffmpeg is None:
+        path = path.with_suffix(".gif")
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    playback_fps = 1000.0 / anim.event_source.interval  # animate() folded the stride into it
+
+    if path.suffix.lower() == ".gif":
+        anim.save(path, writer=animation.PillowWriter(fps=playback_fps))
+        return path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        silent = Path(tmp) / "silent.mp4"
+        plt.rcParams["animation.ffmpeg_path"] = ffmpeg
+        writer = animation.FFMpegWriter(
+            fps=playback_fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"]
+        )
+        anim.save(silent, writer=writer)
+        if audio is None:
+            shutil.move(silent, path)
+            return path
+        from gesturelib.features import save_audio
+
+        wav = Path(tmp) / "speech.wav"
+        save_audio(wav, np.asarray(audio, dtype=np.float32), sample_rate)
+        command = [
+            ffmpeg,
+            "-loglevel",
+            "error",
+            "-y",
+            "-i",
+            str(silent),
+            "-i",
+            str(wav),
+            "-c:v",
+            "copy",
+            "-c:a",
+            "aac",
+            "-shortest",
+            str(path),
+        ]
+        result = subprocess.run(command, capture_output=True, text=True)
+        if result.returncode != 0:
+            raise RuntimeError(
+                f"ffmpeg could not mux the audio into {path}: {result.stderr.strip()}"
+            )
+    return path
+
+
+def plot_timeline(
+    mel, activity, fps: float = FPS, events: dict | None = None, ax=None, title: str | None = None
+):
+    """A log-mel spectrogram with the speech activity as a coloured band underneath.
+
+    Args:
+        mel: ``(T, n_mels)`` log-mel features, one row per motion frame.
+        activity: ``(T,)`` integer :class:`~gesturelib.conventions.Activity` codes.
+        fps: frames per second of both.
+        events: optional ``{label: times_in_seconds}`` drawn as vertical ticks over the
+            spectrogram (e.g. stressed syllables, gesture strokes).
+        ax: two stacked axes ``(spectrogram_ax, activity_ax)``; a new figure when omitted.
+        title: figure title.
+    Returns:
+        The matplotlib ``Figure``.
+    """
+    mel = np.asarray(mel)
+    activity = np.asarray(activity)
+    if mel.ndim != 2:
+        raise ValueError(f"mel must have shape (T, n_mels), got {mel.shape}")
+    if activity.shape != (len(mel),):
+        raise ValueError(
+            f"activity must have shape ({len(mel)},) to match mel, got {activity.shape}"
+        )
+    if ax is None:
+        fig, ax = plt.subplots(
+            2, 1, figsize=(10, 3.2), sharex=True, gridspec_kw={"height_ratios": [4, 1]}
+        )
+    spec_ax, act_ax = ax
+    fig = spec_ax.figure
+    duration = len(mel) / fps
+    spec_ax.imshow(
+        mel.T, origin="lower", aspect="auto", extent=(0, duration, 0, mel.shape[1]), cmap="magma"
+    )
+    spec_ax.set_ylabel("mel band")
+    for (label, times), colour in zip((events or {}).items(), plt.cm.tab10.colors, strict=False):
+        spec_ax.vlines(times, 0, mel.shape[1], colors=[colour], linewidth=1.0, label=label)
+    if events:
+        spec_ax.legend(loc="upper right", fontsize=8)
+    cmap = ListedColormap([ACTIVITY_COLOURS[a] for a in Activity])
+    act_ax.imshow(
+        activity[None, :],
+        aspect="auto",
+        cmap=cmap,
+        vmin=-0.5,
+        vmax=len(Activity) - 0.5,
+        extent=(0, duration, 0, 1),
+        interpolation="nearest",
+    )
+    act_ax.set_yticks([])
+    act_ax.set_xlabel("time (s)")
+    act_ax.legend(
+        handles=[Patch(color=ACTIVITY_COLOURS[a], label=a.label) for a in Activity],
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.9),
+        ncol=4,
+        fontsize=8,
+        frameon=False,
+    )
+    if title:
+        spec_ax.set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def audio_player(audio, sample_rate: int):
+    """An ``IPython.display.Audio`` widget playing mono audio ``(N,)`` (not re-normalised)."""
+    from IPython.display import Audio
+
+    audio = np.asarray(audio, dtype=np.float32)
+    if audio.ndim != 1 or audio.size == 0:
+        raise ValueError(f"audio must be a non-empty 1-D array, got shape {audio.shape}")
+    return Audio(audio, rate=sample_rate, normalize=False)
