@@ -33,7 +33,10 @@ def _numpy_in_numpy_out(fn):
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         given_numpy = any(isinstance(a, np.ndarray) for a in args)
-        converted = [torch.from_numpy(np.ascontiguousarray(a)) if isinstance(a, np.ndarray) else a for a in args]
+        converted = [
+            torch.from_numpy(np.ascontiguousarray(a)) if isinstance(a, np.ndarray) else a
+            for a in args
+        ]
         result = fn(*converted, **kwargs)
         return result.numpy() if given_numpy else result
 

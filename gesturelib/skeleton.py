@@ -78,15 +78,17 @@ T_POSE_OFFSETS = np.array(
 )
 BONE_LENGTHS = np.linalg.norm(T_POSE_OFFSETS, axis=-1)
 
+
+def _mirror_name(name: str) -> str:
+    """``left_x`` <-> ``right_x``; keypoints on the midline are their own mirror image."""
+    for side, other in (("left_", "right_"), ("right_", "left_")):
+        if name.startswith(side):
+            return other + name.removeprefix(side)
+    return name
+
+
 #: Index of each keypoint's mirror image (left <-> right); an involution.
-MIRROR_INDEX: tuple[int, ...] = tuple(
-    JOINT_INDEX[
-        "right_" + name[5:] if name.startswith("left_")
-        else "left_" + name[6:] if name.startswith("right_")
-        else name
-    ]
-    for name in KEYPOINTS
-)
+MIRROR_INDEX: tuple[int, ...] = tuple(JOINT_INDEX[_mirror_name(name)] for name in KEYPOINTS)
 
 #: Lines to draw for a stick figure: (start, end) indices, -1 for the root at the origin.
 BONES: tuple[tuple[int, int], ...] = tuple((parent, child) for child, parent in enumerate(PARENTS))
