@@ -1,0 +1,154 @@
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import torch
+
+from gesturelib.conventions import FPS, SAMPLE_RATE
+from gesturelib.data import (
+    ConversationFeatures,
+    Normaliser,
+    WindowConfig,
+    WindowDataset,
+    control_dims,
+    make_datasets,
+)
+from gesturelib.skeleton import POSE_DIM, mirror_rotations
+
+
+@dataclass
+class FakeConversation:
+    audio: np.ndarray
+    rotations: np.ndarray
+    activity: np.ndarray
+    sample_rate: int = SAMPLE_RATE
+    fps: int = FPS
+
+
+def fake_conversation(n_frames: int, seed: int) -> FakeConversation:
+    """Poses whose every number encodes its frame index (frame t has values t + 0.01 * d)."""
+    rng = np.random.default_rng(seed)
+    frame = np.arange(n_frames, dtype=np.float32)[:, None] + 0.01 * np.arange(POSE_DIM)
+    return FakeConversation(
+        audio=(0.1 * rng.standard_normal(n_frames * SAMPLE_RATE // FPS)).astype(np.float32),
+        rotations=frame.reshape(n_frames, 9, 6).astype(np.float32),
+        activity=rng.integers(0, 4, n_frames),
+    )
+
+
+IDENTITY = Normaliser(
+    pose_mean=np.zeros(POSE_DIM, np.float32),
+    pose_std=np.ones(POSE_DIM, np.float32),
+    speech_mean=np.zeros(27, np.float32),
+    speech_std=np.ones(27, np.float32),
+)
+
+
+@pytest.fixture(scope="module")
+def features():
+    return ConversationFeatures.from_conversation(fake_conversation(100, seed=0))
+
+
+def test_features_have_one_row_per_frame(features):
+    assert features.pose.shape == (100, POSE_DIM)
+    assert features.speech.shape == (100, 27)
+    assert features.activity.shape == (100, 4)
+
+
+@pytest.mark.parametrize("length", [1, 8])
+def test_window_shapes_and_count(features, length):
+    config = WindowConfig(past_poses=5, speech_past=5, speech_future=25, sequence_length=length)
+    dataset = WindowDataset([features], config, IDENTITY)
+    assert len(dataset) == 100 - 25 - length - 5 + 1  # every window whose context fits
+    item = dataset[0]
+    assert item["pose"].shape == (length, POSE_DIM)
+    assert item["past_pose"].shape == (length, 5, POSE_DIM)
+    assert item["speech"].shape == (length, 31, 27)
+    assert item["activity"].shape == (length, 31, 4)
+    assert all(value.dtype == torch.float32 for value in item.values())
+    assert sum(control_dims(config).values()) == 5 * POSE_DIM + 31 * (27 + 4)
+
+
+def test_windows_hold_the_right_frames(features):
+    config = WindowConfig(past_poses=3, speech_past=2, speech_future=4, sequence_length=6, stride=5)
+    dataset = WindowDataset([features], config, IDENTITY)
+    for item_number in (0, 3, len(dataset) - 1):
+        item = dataset[item_number]
+        first = 3 + 5 * item_number  # max(past_poses, speech_past) + stride * n
+        frames = item["pose"][:, 0].round().long()
+        assert frames.tolist() == list(range(first, first + 6))
+        for k, t in enumerate(frames.tolist()):
+            assert item["past_pose"][k, :, 0].round().long().tolist() == [t - 3, t - 2, t - 1]
+            np.testing.assert_allclose(item["speech"][k], features.speech[t - 2 : t + 5])
+            np.testing.assert_allclose(item["activity"][k], features.activity[t - 2 : t + 5])
+    last = dataset[len(dataset) - 1]["pose"][-1, 0].round().long().item()
+    assert last + config.speech_future <= 99, "the future context stays inside the conversation"
+
+
+def test_no_past_poses(features):
+    dataset = WindowDataset([features], WindowConfig(past_poses=0, sequence_length=2), IDENTITY)
+    assert dataset[0]["past_pose"].shape == (2, 0, POSE_DIM)
+
+
+def test_normaliser_standardises_and_inverts():
+    train = [ConversationFeatures.from_conversation(fake_conversation(80, seed)) for seed in (1, 2)]
+    normaliser = Normaliser.fit(train)
+    pose = np.concatenate([f.pose for f in train])
+    normalised = normaliser.normalise_pose(pose)
+    np.testing.assert_allclose(normalised.mean(0), 0.0, atol=1e-4)
+    np.testing.assert_allclose(normalised.std(0), 1.0, atol=1e-4)
+    np.testing.assert_allclose(normaliser.denormalise_pose(normalised), pose, rtol=1e-5, atol=1e-4)
+    tensor = torch.from_numpy(pose)
+    torch.testing.assert_close(
+        normaliser.denormalise_pose(normaliser.normalise_pose(tensor)), tensor
+    )
+    restored = Normaliser.from_dict(normaliser.to_dict())
+    np.testing.assert_array_equal(restored.pose_std, normaliser.pose_std)
+
+
+def test_constant_feature_is_centred_not_blown_up():
+    features = ConversationFeatures.from_conversation(fake_conversation(60, seed=3))
+    constant = ConversationFeatures(np.ones_like(features.pose), features.speech, features.activity)
+    normalised = Normaliser.fit([constant]).normalise_pose(constant.pose)
+    assert np.isfinite(normalised).all() and np.abs(normalised).max() < 1e-3
+
+
+def test_make_datasets_fits_on_train_and_mirrors_train_only():
+    splits = {
+        "train": [fake_conversation(70, 4), fake_conversation(70, 5)],
+        "val": [fake_conversation(70, 6)],
+    }
+    config = WindowConfig()
+    datasets, normaliser = make_datasets(splits, config, mirror_train=True)
+    per_conversation = 70 - 25 - 1 - 5 + 1
+    assert len(datasets["train"]) == 4 * per_conversation  # two conversations and their mirrors
+    assert len(datasets["val"]) == per_conversation
+    train = [ConversationFeatures.from_conversation(c) for c in splits["train"]]
+    expected = Normaliser.fit([*train, *(f.mirrored() for f in train)])
+    np.testing.assert_allclose(normaliser.pose_mean, expected.pose_mean, rtol=1e-6)
+    # The second half of the training items are the mirror images of the first half.
+    mirrored_item = datasets["train"][2 * per_conversation]["pose"][0]
+    raw = normaliser.denormalise_pose(mirrored_item).numpy().reshape(9, 6)
+    original_frame = train[0].pose[5].reshape(9, 6)
+    np.testing.assert_allclose(raw, mirror_rotations(original_frame), atol=1e-4)
+
+
+def test_bad_configs_and_inputs_are_rejected(tmp_path, features):
+    with pytest.raises(ValueError, match="sequence_length must be an integer >= 1"):
+        WindowConfig(sequence_length=0)
+    with pytest.raises(ValueError, match="past_poses must be an integer >= 0"):
+        WindowConfig(past_poses=-1)
+    with pytest.raises(ValueError, match=r"at least 130 frames \(5.2 s\)"):
+        WindowDataset([features], WindowConfig(sequence_length=100), IDENTITY)
+    short_motion = fake_conversation(50, 7)
+    short_motion.rotations = short_motion.rotations[:40]
+    with pytest.raises(ValueError, match="40 motion frames, 50 audio frames"):
+        ConversationFeatures.from_conversation(short_motion)
+    with pytest.raises(ValueError, match=r"must include 'train'"):
+        make_datasets({"val": [fake_conversation(70, 8)]}, WindowConfig())
+    corrupt = tmp_path / "normaliser.json"
+    corrupt.write_text("{not json")
+    with pytest.raises(
+        ValueError, match="cannot read normalisation statistics from .*normaliser.json"
+    ):
+        Normaliser.load(corrupt)
