@@ -56,7 +56,6 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
         viz.save_animation(
             anim,
             out / "agent.mp4",
-            fps=conversation.fps,
             audio=conversation.audio,
             sample_rate=conversation.sample_rate,
             overwrite=True,

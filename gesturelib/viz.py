@@ -238,7 +238,6 @@ def ffmpeg_executable() -> str | None:
 def save_animation(
     anim,
     path,
-    fps: float = FPS,
     audio=None,
     sample_rate: int | None = None,
     overwrite: bool = False,
@@ -246,8 +245,8 @@ def save_animation(
     """Write an animation to a file that any player opens.
 
     Args:
-        anim: from :func:`animate` (made with the same ``stride`` you want to see; ``fps`` is
-            the motion's frame rate, the file plays in real time).
+        anim: from :func:`animate`; the file plays in real time at the frame rate and stride the
+            animation was made with.
         path: ``.mp4`` or ``.gif``. An MP4 needs ffmpeg (see :func:`ffmpeg_executable`); without it
             the animation is written as a GIF next to ``path`` instead, without sound.
         audio: optional mono float audio ``(N,)`` to mux into the MP4, starting at frame 0.
@@ -384,3 +383,25 @@ def audio_player(audio, sample_rate: int):
     if audio.ndim != 1 or audio.size == 0:
         raise ValueError(f"audio must be a non-empty 1-D array, got shape {audio.shape}")
     return Audio(audio, rate=sample_rate, normalize=False)
+
+
+def video_player(anim, audio=None, sample_rate: int | None = None):
+    """A notebook video of ``anim`` with the speech playing along, when ffmpeg is available.
+
+    Renders the animation to an MP4 (see :func:`save_animation`) and embeds it in the notebook.
+    Without ffmpeg, falls back to the JavaScript player of :func:`animation_html` (no sound) and,
+    if ``audio`` is given, a separate :func:`audio_player`.
+
+    Returns:
+        An IPython display object (or a tuple of two) for ``IPython.display.display``.
+    """
+    from IPython.display import HTML, Video
+
+    if ffmpeg_executable() is None:
+        html = HTML(animation_html(anim))
+        return html if audio is None else (html, audio_player(audio, sample_rate))
+    with tempfile.TemporaryDirectory() as tmp:
+        path = save_animation(anim, Path(tmp) / "motion.mp4", audio=audio, sample_rate=sample_rate)
+        return Video(
+            data=path.read_bytes(), embed=True, mimetype="video/mp4", html_attributes="controls"
+        )

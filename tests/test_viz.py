@@ -1,0 +1,94 @@
+import subprocess
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from gesturelib import viz
+from gesturelib.skeleton import forward_kinematics, identity_rot6d
+
+
+@pytest.fixture(scope="module")
+def motion():
+    """A short (20, 9, 3) motion: the T-pose with a slow random drift of the limbs."""
+    rng = np.random.default_rng(0)
+    rot6d = np.tile(identity_rot6d(), (20, 9, 1)) + np.cumsum(rng.normal(0, 0.02, (20, 9, 6)), 0)
+    return forward_kinematics(rot6d)
+
+
+def test_plot_pose_front_and_side(motion):
+    figure = viz.plot_pose(motion[0])
+    assert [ax.get_title() for ax in figure.axes] == ["front view", "side view"]
+    assert len(figure.axes[0].lines) == 9  # one line per limb
+    plt.close(figure)
+    figure = viz.plot_pose(motion[::5], views=("front",))
+    assert len(figure.axes) == 1 and len(figure.axes[0].lines) == 4 * 9
+    plt.close(figure)
+
+
+def test_animate_draws_every_stride_th_frame(motion):
+    anim = viz.animate([motion, motion], titles=["a", "b"], stride=3)
+    assert len(list(anim.new_frame_seq())) == 7  # frames 0, 3, ..., 18
+    assert anim.event_source.interval == pytest.approx(3 * 1000 / 25)
+    assert "<script" in viz.animation_html(anim)
+
+
+def _streams(path) -> str:
+    """ffmpeg's description of the streams in a file (it exits non-zero without an output)."""
+    result = subprocess.run(
+        [viz.ffmpeg_executable(), "-i", str(path)], capture_output=True, text=True
+    )
+    return result.stderr
+
+
+def test_save_animation_muxes_the_audio_into_an_mp4(motion, tmp_path):
+    audio = (0.1 * np.sin(np.arange(16000) / 5)).astype(np.float32)
+    path = viz.save_animation(
+        viz.animate(motion), tmp_path / "a.mp4", audio=audio, sample_rate=16000
+    )
+    assert path == tmp_path / "a.mp4"
+    streams = _streams(path)
+    assert "Video: h264" in streams and "Audio: aac" in streams
+    with pytest.raises(FileExistsError, match="overwrite=True"):
+        viz.save_animation(viz.animate(motion), path)
+
+
+def test_save_animation_falls_back_to_gif_without_ffmpeg(motion, tmp_path, monkeypatch):
+    monkeypatch.setattr(viz, "ffmpeg_executable", lambda: None)
+    path = viz.save_animation(viz.animate(motion, stride=4), tmp_path / "a.mp4")
+    assert path == tmp_path / "a.gif" and path.read_bytes()[:3] == b"GIF"
+
+
+def test_plot_timeline_shows_spectrogram_and_activity():
+    mel = np.random.default_rng(1).normal(size=(50, 27))
+    activity = np.repeat([0, 1, 2, 3, 0], 10)
+    figure = viz.plot_timeline(mel, activity, events={"strokes": [0.3, 1.1]})
+    assert len(figure.axes) == 2
+    plt.close(figure)
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda m: viz.plot_pose(m[:, :8]), r"positions must have shape \(\.\.\., 9, 3\)"),
+        (lambda m: viz.animate([m, m[:10]]), "same length"),
+        (lambda m: viz.animate(m, stride=0), "stride must be a positive integer"),
+        (lambda m: viz.plot_pose(m[0], views=("top",)), "unknown view"),
+        (
+            lambda m: viz.plot_timeline(np.zeros((5, 27)), np.zeros(4, int)),
+            r"activity must have shape \(5,\)",
+        ),
+        (lambda m: viz.save_animation(viz.animate(m), "clip.avi"), "writes .mp4 or .gif"),
+        (lambda m: viz.audio_player(np.zeros((2, 10)), 16000), "1-D"),
+    ],
+)
+def test_bad_input_is_rejected(motion, call, message):
+    with pytest.raises(ValueError, match=message):
+        call(motion)
+
+
+def test_nan_positions_are_rejected(motion):
+    broken = motion.copy()
+    broken[3, 2, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        viz.animate(broken)
