@@ -138,7 +138,7 @@ def plot_pose(
         fig, axes = plt.subplots(1, len(views), figsize=(3.2 * len(views), 3.4), squeeze=False)
         axes = axes[0]
     fig = axes[0].figure
-    alpha = line_style.pop("alpha", 1.0 if len(poses) == 1 else max(0.08, 3.0 / len(poses)))
+    alpha = line_style.pop("alpha", min(1.0, max(0.08, 3.0 / len(poses))))
     for ax, view in zip(axes, views, strict=True):
         for pose in poses:
             _update_lines(_skeleton_lines(ax, view, alpha=alpha, **line_style), pose, view)
@@ -361,17 +361,16 @@ def plot_timeline(
     )
     act_ax.set_yticks([])
     act_ax.set_xlabel("time (s)")
-    act_ax.legend(
+    fig.legend(
         handles=[Patch(color=ACTIVITY_COLOURS[a], label=a.label) for a in Activity],
-        loc="upper center",
-        bbox_to_anchor=(0.5, -0.9),
-        ncol=4,
+        loc="lower center",
+        ncol=len(Activity),
         fontsize=8,
         frameon=False,
     )
     if title:
         spec_ax.set_title(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.07, 1, 1))  # leave room for the legend underneath
     return fig
 
 

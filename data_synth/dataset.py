@@ -1,0 +1,240 @@
+"""The dataset on disk: separate conversations in train/val/test folders, and a manifest.
+
+Layout of a dataset folder::
+
+    DIR/manifest.json           what is where: splits, files, seeds, config, rates, durations
+    DIR/train/conv_0000.wav     one conversation: audio (see data_synth.conversation)
+    DIR/train/conv_0000.npz     activity, rotations, positions
+    DIR/train/conv_0000.json    seeds, style, voices, config, events
+    DIR/val/...  DIR/test/...
+
+Every conversation has its own conversation seed, ``seed * 10000 + index``, so the splits share
+no speech: a model is tested on conversations it never heard. About 10 % of the conversations
+go to validation and 10 % to test (at least one each), the rest to training.
+
+The manifest is written last: a folder without one is an incomplete dataset. Writing refuses to
+replace an existing dataset (or any file it would write) unless ``overwrite`` is given; even then
+it only deletes files that the old manifest lists, never anything else in the folder.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+from tqdm.auto import tqdm
+
+from data_synth.config import ConversationConfig
+from data_synth.conversation import (
+    FILE_FORMAT,
+    GENERATOR_VERSION,
+    MIN_DURATION_S,
+    Conversation,
+    conversation_paths,
+    generate_conversation,
+    load_conversation,
+    save_conversation,
+)
+
+SPLITS = ("train", "val", "test")
+MANIFEST_NAME = "manifest.json"
+DATASET_FORMAT = "data_synth.dataset"
+#: Sizes of the two presets: minutes of conversation, and the length of each conversation.
+QUICK_MINUTES, QUICK_CONVERSATION_S = 3.0, 30.0
+FULL_MINUTES, FULL_CONVERSATION_S = 30.0, 60.0
+#: Fraction of the conversations in each of val and test.
+HELD_OUT_FRACTION = 0.1
+#: Conversation seeds are ``dataset seed * SEED_STRIDE + index``.
+SEED_STRIDE = 10_000
+
+
+def split_sizes(n_conversations: int) -> dict[str, int]:
+    """How many conversations go to each split (at least one each; needs 3 or more)."""
+    if n_conversations < 3:
+        raise ValueError(f"a dataset needs at least 3 conversations (one per split), "
+                         f"got {n_conversations}")
+    held_out = max(1, round(HELD_OUT_FRACTION * n_conversations))
+    return {"train": n_conversations - 2 * held_out, "val": held_out, "test": held_out}
+
+
+def conversation_seed(dataset_seed: int, index: int) -> int:
+    """The conversation seed of conversation ``index`` of a dataset."""
+    if not 0 <= index < SEED_STRIDE:
+        raise ValueError(f"index must be in [0, {SEED_STRIDE}), got {index}")
+    return dataset_seed * SEED_STRIDE + index
+
+
+def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
+                  conversation_s: float = FULL_CONVERSATION_S,
+                  config: ConversationConfig | None = None, overwrite: bool = False,
+                  progress: bool = True) -> dict:
+    """Generate a dataset of ``minutes`` of conversation into ``out_dir``.
+
+    Args:
+        out_dir: the dataset folder (created if needed).
+        minutes: total length; it is split into conversations of ``conversation_s`` seconds
+            (at least 3 conversations).
+        seed: the dataset seed (each conversation gets its own seed from it).
+        conversation_s: length of each conversation in seconds.
+        config: the generator's configuration; ``None`` for the defaults.
+        overwrite: replace an existing dataset or files in the way.
+        progress: show a progress bar.
+    Returns:
+        The manifest (also written to ``out_dir/manifest.json``).
+    Raises:
+        FileExistsError: if ``out_dir`` already holds a dataset or any file this would write,
+            and ``overwrite`` is False. Nothing is written then.
+        ValueError: for bad sizes or seeds.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if not (isinstance(minutes, (int, float)) and math.isfinite(minutes) and minutes > 0):
+        raise ValueError(f"minutes must be a positive number, got {minutes!r}")
+    if not (isinstance(conversation_s, (int, float)) and math.isfinite(conversation_s)
+            and conversation_s >= MIN_DURATION_S):
+        raise ValueError(f"conversation_s must be at least {MIN_DURATION_S} s, "
+                         f"got {conversation_s!r}")
+    config = ConversationConfig() if config is None else config
+    n_conversations = max(3, round(minutes * 60.0 / conversation_s))
+    sizes = split_sizes(n_conversations)
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"{out_dir} exists and is not a folder")
+
+    # Plan every file first, so that a refusal happens before anything is written.
+    plan = []
+    index = 0
+    for split in SPLITS:
+        for _ in range(sizes[split]):
+            plan.append((split, index, out_dir / split / f"conv_{index:04d}"))
+            index += 1
+    manifest_path = out_dir / MANIFEST_NAME
+    planned = [manifest_path] + [p for *_, stem in plan for p in conversation_paths(stem).values()]
+    in_the_way = [p for p in planned if p.exists()]
+    if in_the_way and not overwrite:
+        what = "a dataset" if manifest_path.exists() else "files"
+        shown = ", ".join(str(p) for p in in_the_way[:3])
+        more = f" and {len(in_the_way) - 3} more" if len(in_the_way) > 3 else ""
+        raise FileExistsError(f"{out_dir} already holds {what} ({shown}{more}); "
+                              "pass overwrite=True (--overwrite) to replace it")
+    if overwrite and manifest_path.exists():
+        _remove_old_dataset(out_dir, manifest_path, set(planned))
+
+    splits: dict[str, list[dict]] = {split: [] for split in SPLITS}
+    for split, index, stem in tqdm(plan, desc="conversations", disable=not progress):
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        conversation = generate_conversation(conversation_s, conversation_seed(seed, index),
+                                             config)
+        save_conversation(conversation, stem, overwrite=overwrite)
+        splits[split].append({
+            "name": stem.name,
+            "conversation_seed": conversation.conversation_seed,
+            "motion_seed": conversation.motion_seed,
+            "duration_s": conversation.duration_s,
+            "num_frames": conversation.num_frames,
+            "files": {kind: path.relative_to(out_dir).as_posix()
+                      for kind, path in conversation_paths(stem).items()},
+        })
+    manifest = {
+        "format": DATASET_FORMAT,
+        "generator_version": GENERATOR_VERSION,
+        "conversation_format": FILE_FORMAT,
+        "seed": seed,
+        "minutes": minutes,
+        "conversation_s": conversation_s,
+        "fps": config.fps,
+        "sample_rate": config.sample_rate,
+        "durations_s": {split: sum(e["duration_s"] for e in entries)
+                        for split, entries in splits.items()},
+        "config": config.to_dict(),
+        "splits": splits,
+    }
+    manifest_path.write_text(json.dumps(manifest, indent=1))
+    return manifest
+
+
+def _remove_old_dataset(out_dir: Path, manifest_path: Path, keep: set[Path]) -> None:
+    """Delete the manifest and the files the old manifest lists (only those); ``keep`` are
+    overwritten anyway."""
+    try:
+        old = read_manifest(out_dir)
+    except ValueError:
+        old = {"splits": {}}  # a damaged manifest: leave its files alone
+    manifest_path.unlink()
+    for entries in old["splits"].values():
+        for entry in entries:
+            for relative in entry["files"].values():
+                path = out_dir / relative
+                if path not in keep and path.is_file():
+                    path.unlink()
+
+
+def read_manifest(dataset_dir: str | os.PathLike) -> dict:
+    """Read and check ``dataset_dir/manifest.json``.
+
+    Raises:
+        FileNotFoundError: if the folder or its manifest is missing.
+        ValueError: if the manifest is not a valid data_synth manifest.
+    """
+    dataset_dir = Path(dataset_dir)
+    path = dataset_dir / MANIFEST_NAME
+    if not dataset_dir.is_dir():
+        raise FileNotFoundError(f"dataset folder {dataset_dir} does not exist")
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{path} is missing: {dataset_dir} is not a complete data_synth dataset (writing "
+            "may have been interrupted); regenerate it with "
+            f"`python -m data_synth --out {dataset_dir} --overwrite`")
+    try:
+        manifest = json.loads(path.read_text())
+        if manifest.get("format") != DATASET_FORMAT:
+            raise ValueError(f"its format is {manifest.get('format')!r}, not {DATASET_FORMAT!r}")
+        for split in SPLITS:
+            for entry in manifest["splits"][split]:
+                if set(entry["files"]) != {"audio", "arrays", "metadata"}:
+                    raise ValueError(f"entry {entry.get('name')!r} of split {split!r} must list "
+                                     "its audio, arrays and metadata files")
+    except (ValueError, KeyError, TypeError, AttributeError) as error:
+        raise ValueError(f"{path} is damaged: {error}") from error
+    return manifest
+
+
+def load_split(dataset_dir: str | os.PathLike, split: str) -> list[Conversation]:
+    """Load the conversations of one split (``"train"``, ``"val"`` or ``"test"``).
+
+    Raises:
+        FileNotFoundError: naming the missing manifest or conversation file.
+        ValueError: naming the damaged file.
+    """
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    dataset_dir = Path(dataset_dir)
+    manifest = read_manifest(dataset_dir)
+    conversations = []
+    for entry in manifest["splits"][split]:
+        audio_path = dataset_dir / entry["files"]["audio"]
+        stem = audio_path.with_name(audio_path.name[: -len(".wav")])
+        for kind, path in conversation_paths(stem).items():
+            if Path(entry["files"][kind]) != path.relative_to(dataset_dir):
+                raise ValueError(f"{dataset_dir / MANIFEST_NAME}: the files of {entry['name']} "
+                                 "must share one name stem")
+        conversation = load_conversation(stem)
+        if (conversation.conversation_seed != entry["conversation_seed"]
+                or conversation.num_frames != entry["num_frames"]):
+            raise ValueError(
+                f"{stem}.json does not match {dataset_dir / MANIFEST_NAME} (seed or length "
+                "differs): the folder mixes files of different datasets; regenerate it")
+        conversations.append(conversation)
+    return conversations
+
+
+def load_dataset(dataset_dir: str | os.PathLike) -> dict[str, list[Conversation]]:
+    """Load every split: ``{"train": [...], "val": [...], "test": [...]}``.
+
+    Raises:
+        FileNotFoundError: naming the missing manifest or conversation file.
+        ValueError: naming the damaged file.
+    """
+    return {split: load_split(dataset_dir, split) for split in SPLITS}

@@ -1,0 +1,191 @@
+"""Tests of data_synth's files: a conversation's save/load, and the dataset on disk and its CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_synth import (
+    generate_conversation,
+    load_conversation,
+    load_dataset,
+    load_split,
+    read_manifest,
+    save_conversation,
+    write_dataset,
+)
+from data_synth.__main__ import main
+from data_synth.dataset import SPLITS
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def conversation():
+    return generate_conversation(8.0, seed=5, motion_seed=6)
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory):
+    """A tiny dataset: 0.3 minutes in 6-second conversations (one per split)."""
+    out = tmp_path_factory.mktemp("data") / "synthetic"
+    assert main(["--out", str(out), "--minutes", "0.3", "--seed", "2",
+                 "--conversation-seconds", "6", "--no-progress"]) == 0
+    return out
+
+
+# --------------------------------------------------------------------------- one conversation
+
+
+def test_save_and_load_round_trip(conversation, tmp_path):
+    written = save_conversation(conversation, tmp_path / "talk")
+    assert sorted(p.name for p in written) == ["talk.json", "talk.npz", "talk.wav"]
+    loaded = load_conversation(tmp_path / "talk")
+    np.testing.assert_allclose(loaded.audio, conversation.audio, atol=1.01 / 32768)  # 16-bit
+    for name in ("activity", "rotations", "positions"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(conversation, name))
+    assert loaded.events == conversation.events
+    assert loaded.style == conversation.style and loaded.voices == conversation.voices
+    assert loaded.config == conversation.config
+    assert (loaded.conversation_seed, loaded.motion_seed) == (5, 6)
+    assert (loaded.sample_rate, loaded.fps) == (conversation.sample_rate, conversation.fps)
+    metadata = json.loads((tmp_path / "talk.json").read_text())  # readable by a person
+    assert metadata["events"]["strokes"] and metadata["style"]["speed"] > 0
+
+
+def test_save_never_overwrites_unless_asked(conversation, tmp_path):
+    (tmp_path / "talk.npz").write_bytes(b"precious")
+    with pytest.raises(FileExistsError, match="talk.npz"):
+        save_conversation(conversation, tmp_path / "talk")
+    assert not (tmp_path / "talk.wav").exists()  # nothing was written
+    assert (tmp_path / "talk.npz").read_bytes() == b"precious"
+    save_conversation(conversation, tmp_path / "talk", overwrite=True)
+    assert load_conversation(tmp_path / "talk").num_frames == conversation.num_frames
+
+
+def test_loading_names_the_missing_or_damaged_file(conversation, tmp_path):
+    save_conversation(conversation, tmp_path / "talk")
+    (tmp_path / "talk.json").write_text("{not json")
+    with pytest.raises(ValueError, match="talk.json"):
+        load_conversation(tmp_path / "talk")
+    save_conversation(conversation, tmp_path / "talk", overwrite=True)
+    (tmp_path / "talk.npz").write_bytes(b"garbage")
+    with pytest.raises(ValueError, match="talk.npz"):
+        load_conversation(tmp_path / "talk")
+    (tmp_path / "talk.wav").unlink()
+    with pytest.raises(FileNotFoundError, match="talk.wav"):
+        load_conversation(tmp_path / "talk")
+
+
+# --------------------------------------------------------------------------- the dataset
+
+
+def test_dataset_has_separate_conversations_in_each_split(dataset_dir):
+    manifest = read_manifest(dataset_dir)
+    assert (manifest["fps"], manifest["sample_rate"], manifest["seed"]) == (25, 16000, 2)
+    assert manifest["config"]["motion"]["stroke_lead_s"] == 0.2
+    data = load_dataset(dataset_dir)
+    assert {split: len(data[split]) for split in SPLITS} == {"train": 1, "val": 1, "test": 1}
+    seeds = [c.conversation_seed for split in SPLITS for c in data[split]]
+    assert len(set(seeds)) == 3  # separate conversations
+    audio = [c.audio for split in SPLITS for c in data[split]]
+    assert not np.array_equal(audio[0], audio[1])
+    for split in SPLITS:
+        for entry, conv in zip(manifest["splits"][split], data[split], strict=True):
+            assert conv.duration_s == entry["duration_s"] == 6.0
+            assert conv.num_frames == entry["num_frames"] == 150
+            assert (dataset_dir / entry["files"]["audio"]).is_file()
+    assert manifest["durations_s"]["train"] == 6.0
+    assert len(load_split(dataset_dir, "val")) == 1
+
+
+def test_dataset_is_reproducible_from_its_seed(dataset_dir):
+    manifest = read_manifest(dataset_dir)
+    entry = manifest["splits"]["test"][0]
+    test = load_split(dataset_dir, "test")[0]
+    again = generate_conversation(6.0, seed=entry["conversation_seed"])
+    np.testing.assert_array_equal(again.positions, test.positions)
+
+
+def test_writing_refuses_an_existing_dataset_unless_asked(dataset_dir, capsys):
+    stamp = (dataset_dir / "manifest.json").stat().st_mtime_ns
+    assert main(["--out", str(dataset_dir), "--minutes", "0.3", "--conversation-seconds",
+                 "6", "--no-progress"]) == 2
+    assert "overwrite" in capsys.readouterr().err
+    assert (dataset_dir / "manifest.json").stat().st_mtime_ns == stamp  # untouched
+    with pytest.raises(FileExistsError, match="already holds a dataset"):
+        write_dataset(dataset_dir, 0.3, 2, conversation_s=6.0, progress=False)
+
+
+def test_overwriting_keeps_unrelated_files(tmp_path):
+    out = tmp_path / "data"
+    write_dataset(out, 0.4, 1, conversation_s=6.0, progress=False)  # 4 conversations
+    assert len(read_manifest(out)["splits"]["train"]) == 2
+    notes = out / "train" / "notes.txt"
+    notes.write_text("mine")
+    write_dataset(out, 0.3, 1, conversation_s=6.0, overwrite=True, progress=False)
+    assert notes.read_text() == "mine"
+    assert not (out / "test" / "conv_0003.wav").exists()  # the old dataset's extra files went
+    assert {len(v) for v in load_dataset(out).values()} == {1}
+
+
+def test_writing_refuses_files_in_the_way(tmp_path):
+    out = tmp_path / "data"
+    (out / "train").mkdir(parents=True)
+    (out / "train" / "conv_0000.wav").write_bytes(b"someone else's")
+    with pytest.raises(FileExistsError, match="conv_0000.wav"):
+        write_dataset(out, 0.3, 0, conversation_s=6.0, progress=False)
+    assert not (out / "manifest.json").exists()
+
+
+def test_a_damaged_or_incomplete_dataset_names_the_bad_file(dataset_dir, tmp_path):
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    for path in dataset_dir.rglob("*"):
+        if path.is_file():
+            target = broken / path.relative_to(dataset_dir)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(path.read_bytes())
+    (broken / "val" / "conv_0001.npz").unlink()
+    with pytest.raises(FileNotFoundError, match="conv_0001.npz"):
+        load_dataset(broken)
+    (broken / "manifest.json").write_text('{"format": "data_synth.dataset"}')
+    with pytest.raises(ValueError, match="manifest.json"):
+        load_dataset(broken)
+    (broken / "manifest.json").unlink()
+    with pytest.raises(FileNotFoundError, match="manifest.json"):
+        load_dataset(broken)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_dataset(tmp_path / "nowhere")
+    with pytest.raises(ValueError, match="split"):
+        load_split(dataset_dir, "training")
+
+
+def test_command_line_entry_point(tmp_path):
+    out = tmp_path / "cli"
+    result = subprocess.run(
+        [sys.executable, "-m", "data_synth", "--out", str(out), "--minutes", "0.15",
+         "--conversation-seconds", "3", "--no-progress"],
+        capture_output=True, text=True, cwd=REPOSITORY, timeout=120,
+        env={**os.environ, "GESTURELIB_QUICK": "0"},
+    )
+    assert result.returncode == 0, result.stderr
+    assert "train" in result.stdout
+    assert {len(v) for v in load_dataset(out).values()} == {1}
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [(["--minutes", "-1"], "minutes"), (["--seed", "-3"], "seed"),
+     (["--conversation-seconds", "0.5"], "conversation_s")],
+)
+def test_command_line_rejects_bad_sizes(tmp_path, capsys, arguments, message):
+    assert main(["--out", str(tmp_path / "data"), "--no-progress", *arguments]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "data").exists()
