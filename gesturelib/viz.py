@@ -388,17 +388,17 @@ def video_player(anim, audio=None, sample_rate: int | None = None):
     """A notebook video of ``anim`` with the speech playing along, when ffmpeg is available.
 
     Renders the animation to an MP4 (see :func:`save_animation`) and embeds it in the notebook.
-    Without ffmpeg, falls back to the JavaScript player of :func:`animation_html` (no sound) and,
-    if ``audio`` is given, a separate :func:`audio_player`.
+    Without ffmpeg, falls back to the JavaScript player of :func:`animation_html` (no sound)
+    followed by an audio player for ``audio``, if given.
 
     Returns:
-        An IPython display object (or a tuple of two) for ``IPython.display.display``.
+        An IPython display object (``IPython.display.display`` shows it).
     """
     from IPython.display import HTML, Video
 
     if ffmpeg_executable() is None:
-        html = HTML(animation_html(anim))
-        return html if audio is None else (html, audio_player(audio, sample_rate))
+        sound = "" if audio is None else audio_player(audio, sample_rate)._repr_html_()
+        return HTML(animation_html(anim) + sound)
     with tempfile.TemporaryDirectory() as tmp:
         path = save_animation(anim, Path(tmp) / "motion.mp4", audio=audio, sample_rate=sample_rate)
         return Video(

@@ -59,6 +59,15 @@ def test_save_animation_falls_back_to_gif_without_ffmpeg(motion, tmp_path, monke
     assert path == tmp_path / "a.gif" and path.read_bytes()[:3] == b"GIF"
 
 
+def test_video_player_embeds_an_mp4_or_falls_back_to_html_with_audio(motion, monkeypatch):
+    audio = np.zeros(16000, dtype=np.float32)
+    video = viz.video_player(viz.animate(motion, stride=4), audio, 16000)
+    assert video.mimetype == "video/mp4" and len(video.data) > 1000
+    monkeypatch.setattr(viz, "ffmpeg_executable", lambda: None)
+    html = viz.video_player(viz.animate(motion, stride=4), audio, 16000).data
+    assert "<script" in html and "<audio" in html
+
+
 def test_plot_timeline_shows_spectrogram_and_activity():
     mel = np.random.default_rng(1).normal(size=(50, 27))
     activity = np.repeat([0, 1, 2, 3, 0], 10)
