@@ -1,0 +1,581 @@
+import math
+import os
+from dataclasses import dataclass
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from gesturelib import checkpoints
+from gesturelib.checkpoints import (
+    CheckpointError,
+    CheckpointMismatchError,
+    config_from_dict,
+    load_model,
+    read_checkpoint,
+    save_checkpoint,
+)
+from gesturelib.data import Normaliser
+from gesturelib.train import (
+    History,
+    NonFiniteLossError,
+    TrainConfig,
+    evaluate,
+    load_or_train,
+    noam_learning_rate,
+    train,
+)
+
+# ---------------------------------------------------------------------------------------------
+# A toy problem: linear regression y = x . w + 0.5 + noise, items are dicts like WindowDataset's
+# ---------------------------------------------------------------------------------------------
+
+TRUE_WEIGHTS = torch.tensor([1.5, -2.0, 0.5])
+
+
+def toy_data(n: int, seed: int) -> list[dict[str, torch.Tensor]]:
+    generator = torch.Generator().manual_seed(seed)
+    x = torch.randn(n, 3, generator=generator)
+    y = x @ TRUE_WEIGHTS + 0.5 + 0.1 * torch.randn(n, generator=generator)
+    return [{"x": x[i], "y": y[i]} for i in range(n)]
+
+
+TRAIN, VAL = toy_data(64, seed=1), toy_data(32, seed=2)
+
+
+@dataclass(frozen=True)
+class ToyConfig:
+    dropout: float = 0.0
+    hidden: int = 8
+
+
+class ToyRegressor(nn.Module):
+    """A small MLP with optional dropout; logs the MSE loss and the mean absolute error."""
+
+    config_class = ToyConfig
+
+    def __init__(self, config: ToyConfig):
+        super().__init__()
+        self.config = config
+        self.net = nn.Sequential(
+            nn.Linear(3, config.hidden), nn.Dropout(config.dropout), nn.Linear(config.hidden, 1)
+        )
+
+    def loss(self, batch):
+        error = self.net(batch["x"]).squeeze(-1) - batch["y"]
+        return {"loss": error.pow(2).mean(), "mae": error.abs().mean()}
+
+
+class OtherModel(ToyRegressor):
+    pass
+
+
+def make_model(seed: int = 0, model_class=ToyRegressor, **config) -> nn.Module:
+    torch.manual_seed(seed)
+    return model_class(ToyConfig(**config))
+
+
+def config(**changes) -> TrainConfig:
+    """4 steps an epoch; the learning rate peaks after 8 steps."""
+    base = dict(epochs=4, batch_size=16, warmup_steps=8, lr_max=0.05, lr_min=0.005, patience=None)
+    return TrainConfig(**(base | changes))
+
+
+def weights(model: nn.Module) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+
+def assert_same_weights(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+def assert_same_history(a: History, b: History) -> None:
+    """Equal in everything but wall time."""
+    assert (a.train, a.val, a.learning_rate) == (b.train, b.val, b.learning_rate)
+    assert (a.best_epoch, a.stopped_early) == (b.best_epoch, b.stopped_early)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """An uninterrupted 4-epoch run with dropout: (weights, history)."""
+    model = make_model(dropout=0.3)
+    history = train(model, TRAIN, VAL, config(), progress=False)
+    return weights(model), history
+
+
+# ---------------------------------------------------------------------------------------------
+# Schedule and configuration
+# ---------------------------------------------------------------------------------------------
+
+
+def test_noam_schedule_rises_peaks_decays_and_floors():
+    warmup, lr_max, lr_min = 100, 1e-3, 1e-4
+    rates = np.array([noam_learning_rate(s, warmup, lr_max, lr_min) for s in range(20_000)])
+    assert rates[0] == pytest.approx(lr_max / warmup)
+    assert np.all(np.diff(rates[:warmup]) > 0)  # linear warm-up
+    np.testing.assert_allclose(np.diff(rates[:warmup]), lr_max / warmup)
+    assert np.argmax(rates) == warmup - 1 and rates.max() == pytest.approx(lr_max)
+    assert np.all(np.diff(rates[warmup - 1 :]) <= 0)
+    # inverse square root: lr * sqrt(step) is constant until the floor
+    steps = np.arange(1, 20_001)
+    decaying = (steps > warmup) & (rates > lr_min)
+    np.testing.assert_allclose(rates[decaying] * np.sqrt(steps[decaying]), lr_max * np.sqrt(warmup))
+    # the floor is reached at warmup * (lr_max / lr_min)**2 = 10 000 steps and kept
+    assert rates[10_000:].min() == rates[10_000:].max() == lr_min
+    assert rates[9_000] > lr_min
+
+
+@pytest.mark.parametrize(
+    "args", [(-1, 10, 1e-3, 1e-4), (0, 0, 1e-3, 1e-4), (0, 10, 1e-4, 1e-3), (0, 10, 1e-3, 0.0)]
+)
+def test_noam_rejects_bad_arguments(args):
+    with pytest.raises(ValueError):
+        noam_learning_rate(*args)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("epochs", 0),
+        ("epochs", 2.5),
+        ("batch_size", 0),
+        ("batch_size", True),
+        ("warmup_steps", 0),
+        ("lr_max", -1e-3),
+        ("lr_max", float("nan")),
+        ("lr_min", 0.0),
+        ("lr_min", 1.0),  # above lr_max
+        ("grad_clip_norm", 0.0),
+        ("patience", 0),
+        ("seed", -1),
+        ("num_workers", -1),
+        ("drop_last", "yes"),
+        ("device", "gpu-please"),
+    ],
+)
+def test_train_config_rejects_bad_values(field, value):
+    with pytest.raises(ValueError, match=field):
+        TrainConfig(**{field: value})
+
+
+def test_train_config_quick_and_round_trip():
+    quick = TrainConfig.quick(seed=3)
+    assert quick.epochs < TrainConfig().epochs and quick.seed == 3
+    assert TrainConfig.from_dict(quick.to_dict()) == quick
+    assert TrainConfig(grad_clip_norm=None, patience=None).grad_clip_norm is None
+    with pytest.raises(ValueError, match="learning_rate"):
+        TrainConfig.from_dict({**quick.to_dict(), "learning_rate": 1e-3})
+
+
+def test_config_from_dict_rejects_unknown_keys_and_restores_tuples():
+    @dataclass(frozen=True)
+    class Sizes:
+        widths: tuple = (4, 8)
+
+    assert config_from_dict(Sizes, {"widths": [1, 2]}) == Sizes((1, 2))
+    with pytest.raises(ValueError, match="'depth'"):
+        config_from_dict(Sizes, {"widths": [1], "depth": 3})
+
+
+# ---------------------------------------------------------------------------------------------
+# The loop
+# ---------------------------------------------------------------------------------------------
+
+
+def test_loss_decreases_history_is_filled_and_best_weights_kept():
+    model = make_model()
+    before = evaluate(model, VAL)["loss"]
+    history = train(model, TRAIN, VAL, config(epochs=6), progress=False)
+    assert set(history.train) == set(history.val) == {"loss", "mae"}
+    assert all(len(values) == 6 for values in [*history.train.values(), *history.val.values()])
+    assert history.epochs == 6 and len(history.epoch_seconds) == 6
+    assert all(seconds > 0 for seconds in history.epoch_seconds)
+    assert history.learning_rate[0] == pytest.approx(0.05 * 4 / 8)  # 4 steps of 8 warm-up steps
+    assert history.learning_rate[-1] == pytest.approx(0.05 * math.sqrt(8 / 24))
+    assert history.val["loss"][-1] < 0.2 * before
+    assert history.train["loss"][-1] < 0.2 * history.train["loss"][0]
+    # the model ends with the weights of the best epoch
+    best = history.best_epoch
+    assert history.val["loss"][best - 1] == min(history.val["loss"])
+    assert evaluate(model, VAL)["loss"] == pytest.approx(history.val["loss"][best - 1])
+    assert model.training  # back in the mode it came in
+
+
+def test_validation_runs_in_eval_mode_without_gradients():
+    seen = []
+
+    class Recorder(ToyRegressor):
+        def loss(self, batch):
+            seen.append((self.training, torch.is_grad_enabled()))
+            return super().loss(batch)
+
+    model = make_model(model_class=Recorder, dropout=0.5)
+    train(model, TRAIN, VAL, config(epochs=2), progress=False)
+    # per epoch: 4 training batches (64 / 16), then 2 validation batches (32 / 16)
+    epoch = [(True, True)] * 4 + [(False, False)] * 2
+    assert seen == epoch * 2
+    # with dropout 0.5, the validation loss is still deterministic
+    assert evaluate(model, VAL) == evaluate(model, VAL)
+    assert model.training
+
+
+def test_early_stopping_stops_and_keeps_the_best_epoch():
+    scores = [3.0, 2.0, 2.5, 2.2, 2.1, 1.0, 0.5]
+    snapshots = []
+
+    class Scripted(ToyRegressor):
+        """Validation loss follows `scores` (one validation batch per epoch)."""
+
+        def loss(self, batch):
+            terms = super().loss(batch)
+            if not self.training:
+                snapshots.append(weights(self))
+                terms["loss"] = torch.tensor(scores[len(snapshots) - 1])
+            return terms
+
+    model = make_model(model_class=Scripted)
+    history = train(model, TRAIN, VAL, config(epochs=7, batch_size=32, patience=3), progress=False)
+    assert history.stopped_early and history.epochs == 5  # epochs 3, 4, 5 do not beat epoch 2
+    assert history.best_epoch == 2 and history.val["loss"] == pytest.approx(scores[:5])
+    assert_same_weights(weights(model), snapshots[1])
+
+
+def test_training_without_validation_keeps_the_best_training_epoch():
+    model = make_model()
+    history = train(model, TRAIN, None, config(), progress=False)
+    assert history.val == {} and history.best_epoch == int(np.argmin(history.train["loss"])) + 1
+
+
+def test_same_seed_same_result_and_caller_random_state_untouched(reference):
+    state = torch.get_rng_state()
+    model = make_model(dropout=0.3)
+    history = train(model, TRAIN, VAL, config(), progress=False)
+    assert torch.equal(torch.get_rng_state(), state)
+    assert_same_weights(weights(model), reference[0])
+    assert_same_history(history, reference[1])
+    other = make_model(dropout=0.3)
+    train(other, TRAIN, VAL, config(seed=1), progress=False)
+    assert not torch.equal(other.net[0].weight, model.net[0].weight)
+
+
+@pytest.mark.parametrize(
+    ("make_bad", "match"),
+    [
+        (lambda terms: terms["loss"], "dict"),
+        (lambda terms: {"mae": terms["mae"]}, "'loss'"),
+        (lambda terms: {**terms, "per_item": torch.zeros(3)}, "per_item"),
+        (lambda terms: {"loss": terms["loss"].detach()}, "trainable"),
+    ],
+)
+def test_model_protocol_violations_are_explained(make_bad, match):
+    class Bad(ToyRegressor):
+        def loss(self, batch):
+            return make_bad(super().loss(batch))
+
+    with pytest.raises((TypeError, ValueError), match=match):
+        train(make_model(model_class=Bad), TRAIN, VAL, config(), progress=False)
+
+
+def test_model_without_config_dataclass_is_rejected():
+    model = make_model()
+    model.config = {"hidden": 8}
+    with pytest.raises(TypeError, match="config dataclass"):
+        train(model, TRAIN, VAL, config(), progress=False)
+
+
+def test_history_round_trip_and_plot(reference):
+    history = reference[1]
+    assert History.from_dict(history.to_dict()) == history
+    figure = history.plot()
+    assert [ax.get_title() for ax in figure.axes] == ["loss", "mae", "learning rate"]
+    assert len(figure.axes[0].lines) == 3  # training, validation, best epoch
+    plt.close(figure)
+
+
+# ---------------------------------------------------------------------------------------------
+# Checkpoints, resuming, faults
+# ---------------------------------------------------------------------------------------------
+
+
+def test_checkpoint_round_trip(tmp_path):
+    normaliser = Normaliser(
+        pose_mean=np.zeros(54, np.float32),
+        pose_std=np.ones(54, np.float32),
+        speech_mean=np.full(27, 2.0, np.float32),
+        speech_std=np.ones(27, np.float32),
+    )
+    model = make_model(hidden=6)
+    history = train(model, TRAIN, VAL, config(), tmp_path, normaliser=normaliser, progress=False)
+    loaded = load_model(tmp_path / "best.pt", ToyRegressor)
+    assert loaded.config == ToyConfig(hidden=6) and not loaded.training
+    assert_same_weights(weights(loaded), weights(model))
+    best = torch.load(tmp_path / "best.pt", weights_only=True)
+    assert best["epoch"] == history.best_epoch and best["epochs_done"] == 4
+    assert History.from_dict(best["history"]) == history
+    restored = Normaliser.from_dict(best["normaliser"])
+    np.testing.assert_array_equal(restored.speech_mean, normaliser.speech_mean)
+    last = torch.load(tmp_path / "last.pt", weights_only=True)
+    assert last["epoch"] == 4 and last["step"] == 16 and last["optimizer"]["state"]
+
+
+def test_resume_equals_uninterrupted_training(tmp_path, reference):
+    train(make_model(dropout=0.3), TRAIN, VAL, config(epochs=2), tmp_path, progress=False)
+    # other initial weights: they are replaced by the checkpoint's
+    model = make_model(seed=99, dropout=0.3)
+    history = train(model, TRAIN, VAL, config(epochs=4), tmp_path, progress=False)
+    assert_same_weights(weights(model), reference[0])
+    assert_same_history(history, reference[1])
+
+
+@pytest.mark.parametrize("fault", [KeyboardInterrupt, RuntimeError])
+def test_interruption_leaves_a_resumable_checkpoint(tmp_path, reference, fault):
+    class Crashing(ToyRegressor):
+        calls, fail_at = 0, 6 * 2 + 2  # in epoch 3 (6 calls an epoch: 4 training + 2 validation)
+
+        def loss(self, batch):
+            Crashing.calls += 1
+            if Crashing.calls == Crashing.fail_at:
+                raise fault("power cut")
+            return super().loss(batch)
+
+    with pytest.raises(fault) as raised:
+        train(
+            make_model(model_class=Crashing, dropout=0.3),
+            TRAIN,
+            VAL,
+            config(),
+            tmp_path,
+            progress=False,
+        )
+    assert "last.pt (after epoch 2) is intact" in "".join(raised.value.__notes__)
+    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 2
+    Crashing.fail_at = None
+    model = make_model(seed=5, model_class=Crashing, dropout=0.3)
+    history = train(model, TRAIN, VAL, config(), tmp_path, progress=False)
+    assert_same_weights(weights(model), reference[0])
+    assert_same_history(history, reference[1])
+
+
+@pytest.mark.parametrize("where", ["loss", "gradient"])
+def test_non_finite_loss_stops_before_the_update(tmp_path, where):
+    before_failure = {}
+
+    class Exploding(ToyRegressor):
+        calls = 0
+
+        def loss(self, batch):
+            terms = super().loss(batch)
+            Exploding.calls += 1
+            if Exploding.calls == 9:  # epoch 2, third training batch
+                before_failure.update(weights(self))
+                if where == "loss":
+                    terms["loss"] = terms["loss"] * float("nan")
+                else:  # a finite loss of 0 whose gradient is NaN: d sqrt(|w - w|)/dw
+                    weight = self.net[0].weight
+                    terms["loss"] = terms["loss"] + (weight - weight.detach()).abs().sum().sqrt()
+            return terms
+
+    model = make_model(model_class=Exploding)
+    with pytest.raises(NonFiniteLossError, match=f"non-finite {where}.*epoch 2, batch 3"):
+        train(model, TRAIN, VAL, config(), tmp_path, progress=False)
+    assert_same_weights(weights(model), before_failure)  # no step was taken
+    for name in ("last.pt", "best.pt"):
+        saved = read_checkpoint(tmp_path / name)["model"]
+        assert all(torch.isfinite(value).all() for value in saved.values())
+    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 1
+
+
+def test_checkpoint_write_is_atomic(tmp_path, monkeypatch):
+    path = tmp_path / "best.pt"
+    good = {"kind": "best", "model": {"w": torch.ones(3)}}
+    save_checkpoint(good, path)
+
+    def failing_save(contents, file):
+        file.write(b"half a checkpoint")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(checkpoints.torch, "save", failing_save)
+    with pytest.raises(OSError, match="disk full"):
+        save_checkpoint({"kind": "best", "model": {"w": torch.zeros(3)}}, path)
+    monkeypatch.undo()
+    assert os.listdir(tmp_path) == ["best.pt"]  # the temporary file is gone
+    assert torch.equal(torch.load(path, weights_only=True)["model"]["w"], torch.ones(3))
+
+
+def test_failed_save_during_training_keeps_the_previous_epoch(tmp_path, monkeypatch, reference):
+    real_save, saves = torch.save, []
+
+    def save_until_epoch_3(contents, file):
+        saves.append(contents["kind"])
+        if contents["kind"] == "last" and contents["epoch"] == 3:
+            raise OSError("disk full")
+        real_save(contents, file)
+
+    monkeypatch.setattr(checkpoints.torch, "save", save_until_epoch_3)
+    with pytest.raises(OSError):
+        train(make_model(dropout=0.3), TRAIN, VAL, config(), tmp_path, progress=False)
+    monkeypatch.undo()
+    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 2
+    model = make_model(dropout=0.3)
+    train(model, TRAIN, VAL, config(), tmp_path, progress=False)
+    assert_same_weights(weights(model), reference[0])
+
+
+def test_corrupt_checkpoint_error_names_the_file(tmp_path):
+    train(make_model(), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
+    best = tmp_path / "best.pt"
+    best.write_bytes(best.read_bytes()[:200])  # truncated
+    with pytest.raises(CheckpointError, match="best.pt.*corrupt"):
+        load_model(best, ToyRegressor)
+    with pytest.raises(CheckpointError, match="best.pt"):
+        train(make_model(), TRAIN, VAL, config(epochs=2), tmp_path, progress=False)
+    (tmp_path / "notes.pt").write_text("not a checkpoint")
+    with pytest.raises(CheckpointError, match="notes.pt"):
+        read_checkpoint(tmp_path / "notes.pt")
+    with pytest.raises(CheckpointError, match="no checkpoint at .*missing.pt"):
+        load_model(tmp_path / "missing.pt", ToyRegressor)
+
+
+def test_mismatched_checkpoints_are_refused_with_the_difference(tmp_path):
+    train(make_model(), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
+    best = tmp_path / "best.pt"
+    with pytest.raises(CheckpointMismatchError, match="best.pt holds a 'ToyRegressor', not a 'Oth"):
+        load_model(best, OtherModel)
+    # another model config, another training config: refused, naming the field
+    with pytest.raises(CheckpointMismatchError, match=r"last.pt.*\n.*model config.hidden"):
+        train(make_model(hidden=4), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
+    with pytest.raises(CheckpointMismatchError, match="(?s)training config.lr_max.*overwrite=True"):
+        train(make_model(), TRAIN, VAL, config(epochs=1, lr_max=0.1), tmp_path, progress=False)
+    # ... unless asked to overwrite
+    train(
+        make_model(hidden=4), TRAIN, VAL, config(epochs=1), tmp_path, progress=False, overwrite=True
+    )
+    assert load_model(best, ToyRegressor).config.hidden == 4
+    # a config its class rejects
+    contents = read_checkpoint(best)
+    save_checkpoint({**contents, "model_config": {"hidden": 4, "depth": 2}}, best)
+    with pytest.raises(CheckpointMismatchError, match="best.pt.*ToyConfig.*'depth'"):
+        load_model(best, ToyRegressor)
+    # parameter shapes that do not fit the config
+    contents["model"]["net.0.weight"] = torch.zeros(4, 5)
+    save_checkpoint(contents, best)
+    with pytest.raises(
+        CheckpointMismatchError, match=r"best.pt.*\n.*net.0.weight.*\(4, 5\).*\(4, 3\)"
+    ):
+        load_model(best, ToyRegressor)
+
+
+# ---------------------------------------------------------------------------------------------
+# Load or train
+# ---------------------------------------------------------------------------------------------
+
+
+class Counting(ToyRegressor):
+    calls = 0
+
+    def loss(self, batch):
+        Counting.calls += 1
+        return super().loss(batch)
+
+
+def test_load_or_train_trains_once_then_loads(tmp_path):
+    Counting.calls = 0
+    model, history = load_or_train(
+        Counting, ToyConfig(), TRAIN, VAL, config(), tmp_path, progress=False
+    )
+    assert Counting.calls == 4 * (4 + 2) and not model.training
+    (folder,) = tmp_path.iterdir()
+    assert folder.name.startswith("Counting-") and (folder / "best.pt").exists()
+
+    Counting.calls = 0
+    again, history_again = load_or_train(
+        Counting, ToyConfig(), TRAIN, VAL, config(), tmp_path, progress=False
+    )
+    assert Counting.calls == 0
+    assert_same_weights(weights(again), weights(model))
+    assert history_again == history
+    # execution settings do not make another run
+    load_or_train(
+        Counting,
+        ToyConfig(),
+        TRAIN,
+        VAL,
+        config(num_workers=0, device="cpu:0"),
+        tmp_path,
+        progress=False,
+    )
+    assert Counting.calls == 0 and len(list(tmp_path.iterdir())) == 1
+
+
+def test_load_or_train_distinguishes_configs_and_data(tmp_path):
+    Counting.calls = 0
+    runs = [
+        (ToyConfig(), config(), TRAIN),
+        (ToyConfig(hidden=4), config(), TRAIN),
+        (ToyConfig(), config(lr_max=0.02), TRAIN),
+        (ToyConfig(), config(), toy_data(64, seed=7)),
+    ]
+    for model_config, train_config, data in runs:
+        load_or_train(Counting, model_config, data, VAL, train_config, tmp_path, progress=False)
+    assert Counting.calls == 4 * 4 * (4 + 2) and len(list(tmp_path.iterdir())) == 4
+
+
+def test_load_or_train_resumes_a_partial_run(tmp_path):
+    class Interrupted(ToyRegressor):
+        calls, fail_at = 0, None
+
+        def loss(self, batch):
+            Interrupted.calls += 1
+            if Interrupted.calls == Interrupted.fail_at:
+                raise KeyboardInterrupt
+            return super().loss(batch)
+
+    clean, _ = load_or_train(
+        Interrupted, ToyConfig(), TRAIN, VAL, config(), tmp_path / "clean", progress=False
+    )
+    Interrupted.calls, Interrupted.fail_at = 0, 6 * 2 + 1  # first batch of epoch 3
+    with pytest.raises(KeyboardInterrupt):
+        load_or_train(
+            Interrupted, ToyConfig(), TRAIN, VAL, config(), tmp_path / "cut", progress=False
+        )
+    Interrupted.calls, Interrupted.fail_at = 0, None
+    model, _ = load_or_train(
+        Interrupted, ToyConfig(), TRAIN, VAL, config(), tmp_path / "cut", progress=False
+    )
+    assert Interrupted.calls == 2 * (4 + 2)  # only epochs 3 and 4
+    assert_same_weights(weights(model), weights(clean))
+
+
+def test_training_a_finished_run_again_only_loads_its_best_weights(tmp_path):
+    model = make_model(model_class=Counting)
+    history = train(model, TRAIN, VAL, config(), tmp_path, progress=False)
+    Counting.calls = 0
+    again = make_model(seed=3, model_class=Counting)
+    assert train(again, TRAIN, VAL, config(), tmp_path, progress=False) == history
+    assert Counting.calls == 0
+    assert_same_weights(weights(again), weights(model))
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_resume_on_a_gpu_equals_uninterrupted_training_and_loads_on_the_cpu(tmp_path):
+    gpu = config(device="cuda")
+    model = make_model(dropout=0.3)
+    train(model, TRAIN, VAL, gpu, progress=False)
+    assert model.net[0].weight.is_cuda
+    train(
+        make_model(dropout=0.3),
+        TRAIN,
+        VAL,
+        config(epochs=2, device="cuda"),
+        tmp_path,
+        progress=False,
+    )
+    resumed = make_model(dropout=0.3)
+    train(resumed, TRAIN, VAL, gpu, tmp_path, progress=False)
+    assert_same_weights(weights(resumed), weights(model))
+    on_cpu = load_model(tmp_path / "best.pt", ToyRegressor)
+    assert_same_weights(weights(on_cpu), {k: v.cpu() for k, v in weights(model).items()})
