@@ -8,8 +8,9 @@ Layout of a dataset folder::
     DIR/train/conv_0000.json    seeds, style, voices, config, events
     DIR/val/...  DIR/test/...
 
-Every conversation has its own conversation seed, ``seed * 10000 + index``, so the splits share
-no speech: a model is tested on conversations it never heard. About 10 % of the conversations
+Every conversation has its own conversation seed, ``(seed + 1) * 10000 + index``, so the splits
+share no speech: a model is tested on conversations it never heard. Seeds below 10000 are never
+used by a dataset, so the small seeds of demos and notebooks never replay a dataset's speech. About 10 % of the conversations
 go to validation and 10 % to test (at least one each), the rest to training.
 
 The manifest is written last: a folder without one is an incomplete dataset. Writing refuses to
@@ -46,7 +47,7 @@ QUICK_MINUTES, QUICK_CONVERSATION_S = 3.0, 30.0
 FULL_MINUTES, FULL_CONVERSATION_S = 30.0, 60.0
 #: Fraction of the conversations in each of val and test.
 HELD_OUT_FRACTION = 0.1
-#: Conversation seeds are ``dataset seed * SEED_STRIDE + index``.
+#: Conversation seeds are ``(dataset seed + 1) * SEED_STRIDE + index``: never below SEED_STRIDE.
 SEED_STRIDE = 10_000
 
 
@@ -63,7 +64,7 @@ def conversation_seed(dataset_seed: int, index: int) -> int:
     """The conversation seed of conversation ``index`` of a dataset."""
     if not 0 <= index < SEED_STRIDE:
         raise ValueError(f"index must be in [0, {SEED_STRIDE}), got {index}")
-    return dataset_seed * SEED_STRIDE + index
+    return (dataset_seed + 1) * SEED_STRIDE + index
 
 
 def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,

@@ -367,6 +367,10 @@ def lead_lag(reference, signal, fps, max_lag_s: float) -> float:
     Returns:
         The lag in seconds. If the peak lies at the edge of the search range a warning says the
         true lag may lie beyond it.
+
+    Choose ``max_lag_s`` well beyond the lag you expect: for rhythmic signals (accents every few
+    syllables) the correlation has side peaks, so a true lag outside the range shows up as one of
+    those side peaks *inside* it, and no warning can tell.
     """
     fps = _check_fps(fps)
     reference, signal = _as_array(reference, "reference"), _as_array(signal, "signal")

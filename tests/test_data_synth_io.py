@@ -35,8 +35,22 @@ def conversation():
 def dataset_dir(tmp_path_factory):
     """A tiny dataset: 0.3 minutes in 6-second conversations (one per split)."""
     out = tmp_path_factory.mktemp("data") / "synthetic"
-    assert main(["--out", str(out), "--minutes", "0.3", "--seed", "2",
-                 "--conversation-seconds", "6", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "--out",
+                str(out),
+                "--minutes",
+                "0.3",
+                "--seed",
+                "2",
+                "--conversation-seconds",
+                "6",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     return out
 
 
@@ -115,8 +129,20 @@ def test_dataset_is_reproducible_from_its_seed(dataset_dir):
 
 def test_writing_refuses_an_existing_dataset_unless_asked(dataset_dir, capsys):
     stamp = (dataset_dir / "manifest.json").stat().st_mtime_ns
-    assert main(["--out", str(dataset_dir), "--minutes", "0.3", "--conversation-seconds",
-                 "6", "--no-progress"]) == 2
+    assert (
+        main(
+            [
+                "--out",
+                str(dataset_dir),
+                "--minutes",
+                "0.3",
+                "--conversation-seconds",
+                "6",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     assert "overwrite" in capsys.readouterr().err
     assert (dataset_dir / "manifest.json").stat().st_mtime_ns == stamp  # untouched
     with pytest.raises(FileExistsError, match="already holds a dataset"):
@@ -170,9 +196,22 @@ def test_a_damaged_or_incomplete_dataset_names_the_bad_file(dataset_dir, tmp_pat
 def test_command_line_entry_point(tmp_path):
     out = tmp_path / "cli"
     result = subprocess.run(
-        [sys.executable, "-m", "data_synth", "--out", str(out), "--minutes", "0.15",
-         "--conversation-seconds", "3", "--no-progress"],
-        capture_output=True, text=True, cwd=REPOSITORY, timeout=120,
+        [
+            sys.executable,
+            "-m",
+            "data_synth",
+            "--out",
+            str(out),
+            "--minutes",
+            "0.15",
+            "--conversation-seconds",
+            "3",
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPOSITORY,
+        timeout=120,
         env={**os.environ, "GESTURELIB_QUICK": "0"},
     )
     assert result.returncode == 0, result.stderr
@@ -182,10 +221,23 @@ def test_command_line_entry_point(tmp_path):
 
 @pytest.mark.parametrize(
     ("arguments", "message"),
-    [(["--minutes", "-1"], "minutes"), (["--seed", "-3"], "seed"),
-     (["--conversation-seconds", "0.5"], "conversation_s")],
+    [
+        (["--minutes", "-1"], "minutes"),
+        (["--seed", "-3"], "seed"),
+        (["--conversation-seconds", "0.5"], "conversation_s"),
+    ],
 )
 def test_command_line_rejects_bad_sizes(tmp_path, capsys, arguments, message):
     assert main(["--out", str(tmp_path / "data"), "--no-progress", *arguments]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "data").exists()
+
+
+def test_dataset_seeds_never_collide_with_the_small_seeds_of_demos():
+    from data_synth.dataset import SEED_STRIDE, conversation_seed
+
+    assert (
+        min(conversation_seed(seed, index) for seed in range(3) for index in range(30))
+        >= SEED_STRIDE
+    )
+    assert len({conversation_seed(seed, index) for seed in range(3) for index in range(30)}) == 90
