@@ -1,0 +1,192 @@
+"""Conditioner networks: the neural networks inside a coupling layer.
+
+A coupling layer keeps half of the features, ``x_a``, and transforms the other half with
+parameters computed by a conditioner from ``[x_a, cond]``. Any network works (the coupling stays
+invertible whatever it computes), so the conditioner is pluggable:
+
+* :class:`MLPConditioner` acts on every frame independently: inputs ``(..., I)``.
+* :class:`LSTMConditioner` and :class:`GRUConditioner` run along time: inputs ``(B, T, I)``. This
+  is what MoGlow (LSTM) and Ye et al. (GRU) use, so that a flow over the next pose can remember the
+  whole past, not only the few frames in its condition.
+
+All three share one interface, ``conditioner(inputs, state=None) -> (outputs, state)``, and are
+*stateless* modules: a recurrent conditioner's hidden state is an argument and a result, never an
+attribute. Running a whole sequence at once and running it one frame at a time, passing the state
+along, therefore give the same outputs. A feed-forward conditioner takes and returns
+``state=None``.
+
+Every conditioner ends with a zero-initialised linear layer, so a new coupling outputs zero shift
+and zero log-scale: it starts as the identity and the flow starts as its ActNorm and linear layers.
+
+A custom conditioner can be passed to a coupling if it has the same interface and the attributes
+``in_features``, ``out_features`` and ``recurrent``.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+#: The state of one recurrent conditioner: ``(h, c)`` for an LSTM, ``h`` for a GRU, each
+#: ``(num_layers, B, hidden)``; ``None`` for a feed-forward conditioner or a zero initial state.
+ConditionerState = torch.Tensor | tuple[torch.Tensor, torch.Tensor] | None
+
+
+def zero_linear(in_features: int, out_features: int) -> nn.Linear:
+    """A linear layer whose weight and bias start at zero (so the coupling starts as identity)."""
+    layer = nn.Linear(in_features, out_features)
+    nn.init.zeros_(layer.weight)
+    nn.init.zeros_(layer.bias)
+    return layer
+
+
+def _check_sizes(in_features: int, out_features: int, hidden: int, num_layers: int) -> None:
+    for name, value in [("out_features", out_features), ("hidden", hidden)]:
+        if value < 1:
+            raise ValueError(f"{name} must be at least 1, got {value}")
+    if in_features < 0:
+        raise ValueError(f"in_features must be non-negative, got {in_features}")
+    if num_layers < 1:
+        raise ValueError(f"num_layers must be at least 1, got {num_layers}")
+
+
+class MLPConditioner(nn.Module):
+    """A multilayer perceptron applied to every frame: ``(..., I)`` -> ``(..., O)``.
+
+    Args:
+        in_features: ``I``, the size of ``[x_a, cond]``.
+        out_features: ``O``, the number of coupling parameters.
+        hidden: width of each hidden layer.
+        num_layers: number of hidden layers (each Linear + ReLU), before the zero-initialised
+            output layer.
+    """
+
+    recurrent = False
+
+    def __init__(self, in_features: int, out_features: int, hidden: int = 64, num_layers: int = 2):
+        super().__init__()
+        _check_sizes(in_features, out_features, hidden, num_layers)
+        self.in_features, self.out_features = in_features, out_features
+        layers: list[nn.Module] = []
+        width = in_features
+        for _ in range(num_layers):
+            layers += [nn.Linear(width, hidden), nn.ReLU()]
+            width = hidden
+        self.hidden_layers = nn.Sequential(*layers)
+        self.output = zero_linear(hidden, out_features)
+
+    def forward(self, inputs: torch.Tensor, state: ConditionerState = None):
+        """``inputs`` ``(..., I)`` -> ``(outputs (..., O), None)``; ``state`` must be None."""
+        if state is not None:
+            raise ValueError("an MLP conditioner has no recurrent state; pass state=None")
+        return self.output(self.hidden_layers(inputs)), None
+
+
+class _RecurrentConditioner(nn.Module):
+    """A stacked LSTM or GRU along time, then a zero-initialised linear layer per frame."""
+
+    recurrent = True
+    rnn_class: type[nn.RNNBase]
+
+    def __init__(self, in_features: int, out_features: int, hidden: int = 64, num_layers: int = 2):
+        super().__init__()
+        _check_sizes(in_features, out_features, hidden, num_layers)
+        if in_features < 1:
+            raise ValueError(f"a recurrent conditioner needs in_features >= 1, got {in_features}")
+        self.in_features, self.out_features = in_features, out_features
+        self.hidden, self.num_layers = hidden, num_layers
+        self.rnn = self.rnn_class(in_features, hidden, num_layers, batch_first=True)
+        self.output = zero_linear(hidden, out_features)
+
+    def forward(self, inputs: torch.Tensor, state: ConditionerState = None):
+        """Run along time.
+
+        Args:
+            inputs: ``(B, T, I)``.
+            state: the state after the previous frame (see :data:`ConditionerState`), or None
+                for a zero state (the start of a sequence).
+        Returns:
+            ``outputs`` ``(B, T, O)`` and the state after the last frame.
+        """
+        if inputs.dim() != 3 or inputs.shape[-1] != self.in_features:
+            raise ValueError(
+                f"a recurrent conditioner takes inputs of shape (B, T, I) = "
+                f"(B, T, {self.in_features}), got {tuple(inputs.shape)}"
+            )
+        if state is not None:
+            self._check_state(state, inputs.shape[0])
+        hidden_sequence, state = self.rnn(inputs, state)
+        return self.output(hidden_sequence), state
+
+    def initial_state(self, batch_size: int, device=None, dtype=None) -> ConditionerState:
+        """The zero state for ``batch_size`` sequences (what ``state=None`` stands for)."""
+        raise NotImplementedError
+
+    def _state_tensors(self, state) -> tuple[torch.Tensor, ...]:
+        raise NotImplementedError
+
+    def _check_state(self, state, batch_size: int) -> None:
+        wanted = (self.num_layers, batch_size, self.hidden)
+        tensors = self._state_tensors(state)
+        if any(not isinstance(t, torch.Tensor) or tuple(t.shape) != wanted for t in tensors):
+            got = [
+                tuple(t.shape) if isinstance(t, torch.Tensor) else type(t).__name__ for t in tensors
+            ]
+            raise ValueError(
+                f"{self.state_description} each of shape (num_layers, B, hidden) = {wanted}, "
+                f"got {got}"
+            )
+
+
+class LSTMConditioner(_RecurrentConditioner):
+    """An LSTM conditioner (as in MoGlow); its state is ``(h, c)``, each ``(num_layers, B, H)``.
+
+    Args: as :class:`MLPConditioner`, with ``num_layers`` the number of stacked LSTM layers.
+    """
+
+    rnn_class = nn.LSTM
+    state_description = "an LSTM conditioner's state must be a tuple (h, c),"
+
+    def initial_state(self, batch_size: int, device=None, dtype=None):
+        zeros = torch.zeros(self.num_layers, batch_size, self.hidden, device=device, dtype=dtype)
+        return zeros, zeros.clone()
+
+    def _state_tensors(self, state):
+        if not isinstance(state, tuple | list) or len(state) != 2:
+            raise ValueError(
+                "an LSTM conditioner's state must be a tuple (h, c) of two tensors of shape "
+                f"(num_layers, B, hidden), got {type(state).__name__}"
+            )
+        return tuple(state)
+
+
+class GRUConditioner(_RecurrentConditioner):
+    """A GRU conditioner (as in Ye et al.); its state is ``h`` ``(num_layers, B, H)``.
+
+    Args: as :class:`MLPConditioner`, with ``num_layers`` the number of stacked GRU layers.
+    """
+
+    rnn_class = nn.GRU
+    state_description = "a GRU conditioner's state must be one tensor h"
+
+    def initial_state(self, batch_size: int, device=None, dtype=None):
+        return torch.zeros(self.num_layers, batch_size, self.hidden, device=device, dtype=dtype)
+
+    def _state_tensors(self, state):
+        return (state,)
+
+
+CONDITIONERS: dict[str, type[nn.Module]] = {
+    "mlp": MLPConditioner,
+    "lstm": LSTMConditioner,
+    "gru": GRUConditioner,
+}
+
+
+def make_conditioner(
+    kind: str, in_features: int, out_features: int, hidden: int = 64, num_layers: int = 2
+) -> nn.Module:
+    """Build a conditioner by name: ``"mlp"``, ``"lstm"`` or ``"gru"``."""
+    if kind not in CONDITIONERS:
+        raise ValueError(f"unknown conditioner {kind!r}; choose one of {sorted(CONDITIONERS)}")
+    return CONDITIONERS[kind](in_features, out_features, hidden=hidden, num_layers=num_layers)

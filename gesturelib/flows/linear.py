@@ -1,0 +1,132 @@
+"""The invertible linear layer: Glow's invertible 1x1 convolution, applied to vectors.
+
+A coupling layer only transforms half of the features given the other half, so between couplings
+the features must be mixed. Glow learns the mixing: ``y = W x`` with an invertible ``D x D``
+matrix ``W``, whose log-determinant is ``log|det W|`` per frame.
+
+Two parametrisations:
+
+* **LU** (default): ``W = P L (U + diag(sign_s * exp(log_abs_s)))`` with ``P`` a fixed
+  permutation, ``L`` unit lower-triangular and ``U`` strictly upper-triangular. Then
+  ``log|det W| = sum(log_abs_s)`` costs O(D), ``W`` can never become singular (its diagonal
+  factor is ``exp(.)`` times a fixed sign), and the inverse needs only two triangular solves.
+* **plain**: ``W`` is a free matrix; ``log|det W|`` comes from ``torch.linalg.slogdet`` (O(D^3)).
+
+Both start from a random rotation (orthogonal, determinant +1), so at initialisation the layer
+only mixes and its log-determinant is zero. The inverse matrix is computed in float64 on every
+call and never cached, so it cannot go stale after an optimiser step.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from gesturelib.flows.checks import check_features, frames_per_sample
+
+
+def random_rotation(dim: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    """A rotation matrix ``(dim, dim)`` drawn uniformly (Haar measure), in float64.
+
+    Args:
+        dim: the size ``D``.
+        generator: torch generator for reproducibility (the global one if None).
+    """
+    gaussian = torch.randn(dim, dim, generator=generator, dtype=torch.float64)
+    q, r = torch.linalg.qr(gaussian)
+    q = q * torch.sign(torch.diagonal(r))  # makes the draw uniform over orthogonal matrices
+    if torch.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+class InvertibleLinear(nn.Module):
+    """``y = W x`` with an invertible ``W`` ``(D, D)``, LU-decomposed by default.
+
+    Direction: :meth:`forward` maps data to noise (``y = W x``); :meth:`inverse` maps back.
+
+    Args:
+        dim: number of features ``D``.
+        lu: LU parametrisation (True) or a plain matrix (False); see the module docstring.
+        generator: torch generator for the random initial rotation (the global one if None).
+    """
+
+    def __init__(self, dim: int, lu: bool = True, generator: torch.Generator | None = None):
+        super().__init__()
+        if dim < 1:
+            raise ValueError(f"dim must be a positive number of features, got {dim}")
+        self.dim = dim
+        self.lu = lu
+        rotation = random_rotation(dim, generator)
+        dtype = torch.get_default_dtype()
+        if lu:
+            permutation, lower, upper = torch.linalg.lu(rotation)
+            diagonal = torch.diagonal(upper)
+            self.register_buffer("permutation", permutation.to(dtype))
+            self.register_buffer("sign_s", torch.sign(diagonal).to(dtype))
+            self.register_buffer("lower_mask", torch.tril(torch.ones(dim, dim, dtype=dtype), -1))
+            self.lower = nn.Parameter(torch.tril(lower, -1).to(dtype))
+            self.upper = nn.Parameter(torch.triu(upper, 1).to(dtype))
+            self.log_abs_s = nn.Parameter(torch.log(diagonal.abs()).to(dtype))
+        else:
+            self.weight = nn.Parameter(rotation.to(dtype))
+
+    def _lu_factors(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """``L`` (unit lower-triangular) and ``U`` (upper-triangular with diagonal ``s``)."""
+        eye = torch.eye(self.dim, dtype=self.lower.dtype, device=self.lower.device)
+        lower = self.lower * self.lower_mask + eye
+        upper = self.upper * self.lower_mask.T + torch.diag(self.sign_s * torch.exp(self.log_abs_s))
+        return lower, upper
+
+    def weight_matrix(self) -> torch.Tensor:
+        """The current matrix ``W`` ``(D, D)``."""
+        if not self.lu:
+            return self.weight
+        lower, upper = self._lu_factors()
+        return self.permutation @ lower @ upper
+
+    def inverse_matrix(self) -> torch.Tensor:
+        """``W^-1`` ``(D, D)``, computed in float64 from the current parameters (never cached)."""
+        if not self.lu:
+            return torch.linalg.inv(self.weight.double()).to(self.weight.dtype)
+        lower, upper = (factor.double() for factor in self._lu_factors())
+        eye = torch.eye(self.dim, dtype=torch.float64, device=lower.device)
+        # W^-1 = U^-1 L^-1 P^T, each triangular inverse by a triangular solve.
+        lower_inv = torch.linalg.solve_triangular(lower, eye, upper=False, unitriangular=True)
+        upper_inv = torch.linalg.solve_triangular(upper, eye, upper=True)
+        inverse = upper_inv @ lower_inv @ self.permutation.double().T
+        return inverse.to(self.lower.dtype)
+
+    def log_abs_det(self) -> torch.Tensor:
+        """``log|det W|``, a scalar (per frame)."""
+        if self.lu:
+            return self.log_abs_s.sum()
+        return torch.linalg.slogdet(self.weight)[1]
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Data -> noise: ``y = W x`` for every frame.
+
+        Args:
+            x: ``(B, D)`` or ``(B, T, D)``.
+        Returns:
+            ``y`` of the shape of ``x`` and ``logdet`` ``(B,)``: ``T * log|det W|`` per sample.
+        """
+        check_features(x, self.dim)
+        y = F.linear(x, self.weight_matrix())
+        return y, (self.log_abs_det() * frames_per_sample(x)).expand(x.shape[0])
+
+    def inverse(self, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Noise -> data: ``x = W^-1 y`` for every frame.
+
+        Args:
+            y: ``(B, D)`` or ``(B, T, D)``.
+        Returns:
+            ``x`` of the shape of ``y`` and ``logdet`` ``(B,)``: ``-T * log|det W|`` per sample.
+        """
+        check_features(y, self.dim, name="y")
+        x = F.linear(y, self.inverse_matrix())
+        return x, (-self.log_abs_det() * frames_per_sample(y)).expand(y.shape[0])
+
+    def extra_repr(self) -> str:
+        return f"dim={self.dim}, lu={self.lu}"
