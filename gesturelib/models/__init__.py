@@ -1,0 +1,51 @@
+"""The models of the course, one family per file, each with its config dataclass.
+
+Every model follows the protocol of :mod:`gesturelib.train`: ``model.loss(batch)`` returns a dict
+with ``"loss"`` and other scalars to log, ``model.config`` is its config, and ``Model(config)``
+rebuilds it (``Model.config_class``). Configs have working defaults for the course's data and a
+``quick()`` variant for tests and quick mode.
+
+* :mod:`~gesturelib.models.vae`: :class:`PoseAutoencoder` and :class:`PoseVAE` (single poses),
+  and :class:`CVAE`, the recurrent conditional VAE baseline of the Flow-VAE paper.
+* :mod:`~gesturelib.models.baselines`: the deterministic regressors of Kucherenko et al.,
+  :class:`Aud2Pose` and :class:`Aud2Repr2Pose` (trained after its
+  :class:`MotionDenoisingAutoencoder`).
+"""
+
+from gesturelib.models.baselines import (
+    Aud2Pose,
+    Aud2PoseConfig,
+    Aud2Repr2Pose,
+    Aud2Repr2PoseConfig,
+    MotionDAEConfig,
+    MotionDenoisingAutoencoder,
+    SpeechWindowNet,
+)
+from gesturelib.models.vae import (
+    CVAE,
+    CVAEConfig,
+    PoseAutoencoder,
+    PoseAutoencoderConfig,
+    PoseVAE,
+    PoseVAEConfig,
+    gaussian_kl,
+    reparameterise,
+)
+
+__all__ = [
+    "CVAE",
+    "Aud2Pose",
+    "Aud2PoseConfig",
+    "Aud2Repr2Pose",
+    "Aud2Repr2PoseConfig",
+    "CVAEConfig",
+    "MotionDAEConfig",
+    "MotionDenoisingAutoencoder",
+    "PoseAutoencoder",
+    "PoseAutoencoderConfig",
+    "PoseVAE",
+    "PoseVAEConfig",
+    "SpeechWindowNet",
+    "gaussian_kl",
+    "reparameterise",
+]
