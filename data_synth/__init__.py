@@ -17,13 +17,16 @@ The rules (defaults in brackets; parameters in :mod:`data_synth.config`):
   higher; pitch declination along each phrase. A's voice is low (110-130 Hz), B's high
   (200-220 Hz), 9 dB quieter and muffled (off-microphone).
 * **Beats** (:mod:`data_synth.gestures`): before each of A's phrases its hands rise into a
-  gesture space, then beat once per accent: the wrist speed peaks 0.2 s *before* the accent
-  (``stroke_lead_s``), with a downward stroke of 7-13 cm x emphasis; after the phrase the hands
-  retract to rest (or hold, if A's next phrase follows closely and B stays silent).
+  gesture space in front of the chest (wrists typically 25-40 cm up, the sternum at 50; the upper
+  arms lift), then beat once per accent: the wrist speed peaks 0.2 s *before* the accent
+  (``stroke_lead_s``), with a stroke of 11-20 cm x emphasis, downwards, outwards or forwards
+  (peaks of 60-200 cm/s); after the phrase the hands retract home, in front of the belly (or
+  hold, if A's next phrase follows closely and B stays silent), and sink into the lap when A
+  stays silent for long.
 * **Nods** (:mod:`data_synth.nods`): with emphasis while A speaks; after B's phrases while A
   listens (80 %); with A's own backchannels.
 * **Idle motion** (:mod:`data_synth.motion`): breathing and sway always; while listening the hands
-  rest and idle motion drops to 40 %, so the agent stays close to its mean pose.
+  wait low and idle motion drops to 40 %, so the agent stays close to its mean pose.
 * **Style** (:mod:`data_synth.style`): gesture radius, hand height, speed, symmetry, handedness and
   beat amplitude, drawn per conversation and recorded.
 * **Two seeds** (:mod:`data_synth.conversation`): the conversation seed fixes the speech and the

@@ -219,7 +219,7 @@ class MotionConfig:
         stroke_timing_jitter_s: standard deviation of a beat's timing around the rule.
         rebound_s: time for the hand to recover after the last beat of a phrase.
         preparation_s: time for the hands to rise into the gesture space before a phrase.
-        retraction_s: time for the hands to return to rest after a phrase.
+        retraction_s: time for the hands to return home (in front of the belly) after a phrase.
         accent_nod_probability: chance of a head nod on an accent, times its emphasis.
         accent_nod_deg: amplitude of such a nod at emphasis 1, degrees.
         listening_nod_probability: chance of a nod when the partner ends a phrase.
@@ -237,8 +237,8 @@ class MotionConfig:
     stroke_duration_s: float = 0.2
     stroke_timing_jitter_s: float = 0.02
     rebound_s: float = 0.35
-    preparation_s: float = 0.6
-    retraction_s: float = 0.8
+    preparation_s: float = 0.5
+    retraction_s: float = 0.6
     accent_nod_probability: float = 0.5
     accent_nod_deg: float = 6.0
     listening_nod_probability: float = 0.8
@@ -271,20 +271,20 @@ class MotionConfig:
 class StyleRanges:
     """Ranges of the per-conversation gesture style (see :class:`data_synth.style.Style`)."""
 
-    gesture_radius_cm: tuple[float, float] = (6.0, 16.0)
-    hand_height_cm: tuple[float, float] = (2.0, 8.0)
+    gesture_radius_cm: tuple[float, float] = (10.0, 20.0)
+    hand_height_cm: tuple[float, float] = (14.0, 20.0)
     speed: tuple[float, float] = (0.8, 1.25)
     symmetry: tuple[float, float] = (0.2, 0.8)
     handedness: tuple[float, float] = (0.3, 0.9)
-    beat_amplitude_cm: tuple[float, float] = (7.0, 13.0)
+    beat_amplitude_cm: tuple[float, float] = (11.0, 20.0)
 
     def __post_init__(self):
-        _check_range(self, "gesture_radius_cm", 0.0, 20.0)
-        _check_range(self, "hand_height_cm", 0.0, 25.0)
+        _check_range(self, "gesture_radius_cm", 0.0, 25.0)
+        _check_range(self, "hand_height_cm", 0.0, 30.0)
         _check_range(self, "speed", 0.5, 2.0)
         _check_range(self, "symmetry", 0.0, 1.0)
         _check_range(self, "handedness", 0.0, 1.0)
-        _check_range(self, "beat_amplitude_cm", 0.0, 20.0)
+        _check_range(self, "beat_amplitude_cm", 0.0, 25.0)
 
 
 # --------------------------------------------------------------------------- everything

@@ -5,15 +5,15 @@ The rules, all at once (details and parameters in :mod:`data_synth.gestures`,
 
 * **Always**: breathing (a rate drawn from ``breathing_rate_hz``; the chest pitches 0.3 degrees
   and the shoulders rise by 1.2 degrees with each breath) and a slow sway of torso and head
-  (``sway_deg``) and of the hands (``idle_hand_cm``).
+  (``sway_deg``) and of the hands (``idle_hand_cm``; a hand lying in the lap drifts at 20 %).
 * **Speaking** (the agent's phrases): gesture phrases with beats that lead the accents by
-  ``stroke_lead_s``, nods with emphasis; within a gesture phrase the torso leans 2 degrees
+  ``stroke_lead_s``, nods with emphasis; within a gesture phrase the torso leans 1 degree
   forwards and the idle motion is at full strength.
-* **Listening and silence** (outside gesture phrases): hands at rest (or holding, in a short
-  pause between two phrases of the agent), backchannel nods after the partner's phrases, and the
-  idle motion of torso, head and hands scaled down to ``listening_activity`` (40 %), with a
-  0.4 s transition: the agent stays close to its mean pose, as Taylor et al. observed of their
-  speaker.
+* **Listening and silence** (outside gesture phrases): hands at home in front of the belly, or in
+  the lap after a while (or holding, in a short pause between two phrases of the agent),
+  backchannel nods after the partner's phrases, and the idle motion of torso, head and hands
+  scaled down to ``listening_activity`` (40 %), with a 0.4 s transition: the agent stays close to
+  its mean pose, as Taylor et al. observed of their speaker.
 * **Cross-talk**: the agent's own phrases decide (it gestures while both talk); the partner's
   backchannels during the agent's phrases change nothing.
 
@@ -21,10 +21,11 @@ How a pose is built, frame by frame (frame ``t`` is sampled at its centre ``(t +
 
 1. In a *body frame* (the spine base at the origin, upright): the sternum 50 cm up, the
    shoulders 18 cm to either side (raised by breathing), the wrists at the targets of
-   :mod:`data_synth.gestures` plus idle drift, the elbows from two-bone inverse kinematics with
-   the elbow pointing down, outwards and a little back (:data:`ELBOW_POLE`), so elbows always
-   bend the natural way; the head 20 cm above the sternum and the nose in front of it, turned by
-   the nods and the head's idle motion.
+   :mod:`data_synth.gestures` plus idle drift, the elbows from two-bone inverse kinematics
+   (:func:`elbow_pole`): with the hands low the elbows hang under the shoulders, pointing down
+   and a little back; as the hands rise into the gesture space the upper arms lift, the elbows
+   swinging outwards and forwards. Elbows always bend the natural way. The head sits 20 cm above
+   the sternum and the nose in front of it, turned by the nods and the head's idle motion.
 2. The whole body frame is turned by the torso's pitch, yaw and roll (breathing, sway, lean).
 3. Limb rotations come from :func:`gesturelib.skeleton.rotations_from_positions`, and the
    positions are recomputed from them with :func:`gesturelib.skeleton.forward_kinematics`, so the
@@ -40,7 +41,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from data_synth.config import MotionConfig
 from data_synth.events import Accent, GesturePhrase, Nod, Phrase, Stroke
-from data_synth.gestures import HANDS, SIDE, plan_gestures
+from data_synth.gestures import HANDS, REST_WRIST, SIDE, plan_gestures
 from data_synth.kinematics import euler_matrix, minimum_jerk_path, smooth_noise, two_bone_ik
 from data_synth.nods import nod_pitch, plan_nods
 from data_synth.style import Style
@@ -54,8 +55,19 @@ from gesturelib.skeleton import (
     rotations_from_positions,
 )
 
-#: Direction the left elbow points to (the right one mirrored): down, outwards and back.
-ELBOW_POLE = np.array([0.35, -1.0, -0.25])
+#: Direction the left elbow points to (the right one mirrored) with the hand at rest: down, a
+#: little outwards and back, so the elbow hangs under the shoulder ...
+ELBOW_POLE_REST = np.array([0.1, -1.0, -0.2])
+#: ... and with the hand raised into the gesture space: outwards and a little forwards, so the
+#: upper arm lifts away from the body, as a speaker's does. The elbow turns from one to the other
+#: as the wrist rises from ELBOW_LIFT_CM[0] to ELBOW_LIFT_CM[1] above its rest height.
+ELBOW_POLE_RAISED = np.array([0.5, -1.0, 0.25])
+ELBOW_LIFT_CM = (12.0, 24.0)
+#: The elbow follows a smoothed wrist height (Gaussian sigma, s): it rises with a gesture phrase
+#: and stays up through its beats, rather than flapping with every stroke.
+ELBOW_FOLLOW_S = 0.3
+#: How much further out the elbow points as the hand moves out beyond the shoulder.
+ELBOW_OUTWARD_GAIN = 2.0
 #: Breathing: chest pitch and shoulder rise, degrees at the peak of a breath.
 BREATH_CHEST_DEG = 0.3
 BREATH_SHOULDER_DEG = 1.2
@@ -63,7 +75,7 @@ BREATH_SHOULDER_DEG = 1.2
 BREATH_RATE_WANDER = 0.1
 BREATH_WANDER_TIME_S = 4.0
 #: The torso leans forwards this much while the agent gestures.
-SPEAKING_LEAN_DEG = 2.0
+SPEAKING_LEAN_DEG = 1.0
 #: Idle head motion at full activity, degrees: pitch, yaw, roll.
 HEAD_IDLE_DEG = np.array([2.0, 5.0, 2.0])
 #: The neck (sternum-head limb) follows this fraction of the head's pitch, yaw and roll.
@@ -72,6 +84,10 @@ NECK_SHARE = 0.3
 SWAY_TIME_S = 1.5
 HEAD_TIME_S = 1.0
 HAND_TIME_S = 0.8
+#: A hand's idle drift grows from LAP_DRIFT (of ``idle_hand_cm``) in the lap to full strength
+#: HAND_SUPPORT_CM above it.
+LAP_DRIFT = 0.2
+HAND_SUPPORT_CM = 6.0
 #: How quickly the idle activity follows the change between speaking and listening.
 ACTIVITY_TIME_S = 0.4
 
@@ -131,8 +147,11 @@ def generate_motion(utterances: list[Phrase], accents: list[Accent], style: Styl
         shoulder = sternum + width * np.stack(
             [side * np.cos(shrug), np.sin(shrug), np.zeros(n_frames)], -1)
         target = minimum_jerk_path(plan.key_times[hand], plan.key_points[hand], times)
+        # A hand held up drifts; one lying in the lap barely moves.
+        raised = np.clip((target[:, 1] - REST_WRIST[1]) / HAND_SUPPORT_CM, LAP_DRIFT, 1.0)
+        target += hand_noise[:, h] * raised[:, None]
         elbow, wrist = two_bone_ik(
-            shoulder, target + hand_noise[:, h], ELBOW_POLE * np.array([side, 1.0, 1.0]),
+            shoulder, target, elbow_pole(shoulder, target, side, fps),
             BONE_LENGTHS[JOINT_INDEX[f"{hand}_elbow"]], BONE_LENGTHS[JOINT_INDEX[f"{hand}_wrist"]])
         body[:, JOINT_INDEX[f"{hand}_shoulder"]] = shoulder
         body[:, JOINT_INDEX[f"{hand}_elbow"]] = elbow
@@ -152,6 +171,26 @@ def generate_motion(utterances: list[Phrase], accents: list[Accent], style: Styl
     rotations = rotations_from_positions(world).astype(np.float32)
     positions = forward_kinematics(rotations.astype(np.float64)).astype(np.float32)
     return AgentMotion(positions, rotations, plan.strokes, nods, plan.gesture_phrases)
+
+
+def elbow_pole(shoulder: np.ndarray, wrist: np.ndarray, side: float, fps: int) -> np.ndarray:
+    """Direction ``(T, 3)`` one elbow points to, from shoulder and wrist positions ``(T, 3)``.
+
+    It turns smoothly from :data:`ELBOW_POLE_REST` to :data:`ELBOW_POLE_RAISED` (mirrored by
+    ``side``: +1 left, -1 right) as the wrist, smoothed over :data:`ELBOW_FOLLOW_S`, rises
+    through :data:`ELBOW_LIFT_CM` above its rest height (a smoothstep of the height). A hand out
+    beyond the shoulder takes the elbow further out (:data:`ELBOW_OUTWARD_GAIN`), so the elbow
+    never points across the body.
+    """
+    low, high = ELBOW_LIFT_CM
+    height = gaussian_filter1d(wrist[:, 1], ELBOW_FOLLOW_S * fps)
+    lift = np.clip((height[:, None] - REST_WRIST[1] - low) / (high - low), 0.0, 1.0)
+    lift = lift * lift * (3.0 - 2.0 * lift)
+    pole = ELBOW_POLE_REST + lift * (ELBOW_POLE_RAISED - ELBOW_POLE_REST)
+    reach = wrist - shoulder
+    outward = np.maximum(side * reach[:, 0] / np.linalg.norm(reach, axis=1), 0.0)
+    pole[:, 0] += ELBOW_OUTWARD_GAIN * outward**2  # squared: the pole changes smoothly
+    return pole * np.array([side, 1.0, 1.0])
 
 
 def _gesturing(gesture_phrases: list[GesturePhrase], times: np.ndarray, fps: int) -> np.ndarray:

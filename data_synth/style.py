@@ -22,7 +22,8 @@ class Style:
 
     Attributes:
         gesture_radius_cm: how far the hands wander around the centre of the gesture space
-            between beats (larger: more expansive gestures).
+            from phrase to phrase and beat to beat (larger: more expansive gestures, held
+            further out, with more outward sweeps).
         hand_height_cm: height of the gesture space above the hands' rest position.
         speed: tempo of the gestures: durations of strokes, preparations, retractions and nods
             are divided by it (faster strokes peak at higher wrist speeds).

@@ -16,6 +16,16 @@ from data_synth import (
     measure_stroke_lead,
     resample_motion,
 )
+from data_synth.gestures import (
+    HOME_DWELL_S,
+    REST_WRIST,
+    SETTLE_S,
+    gesture_centre,
+    home_wrist,
+    rest_wrist,
+)
+from data_synth.motion import ELBOW_POLE_RAISED, ELBOW_POLE_REST, elbow_pole
+from data_synth.style import Style
 from gesturelib.conventions import Activity
 from gesturelib.metrics import (
     JOINT_GROUPS,
@@ -27,6 +37,7 @@ from gesturelib.metrics import (
 from gesturelib.skeleton import BONE_LENGTHS, JOINT_INDEX, bone_lengths, forward_kinematics
 
 WRISTS = list(JOINT_GROUPS["wrists"])
+ELBOWS = list(JOINT_GROUPS["elbows"])
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +52,34 @@ def short():
 
 def frame_times(conversation) -> np.ndarray:
     return (np.arange(conversation.num_frames) + 0.5) / conversation.fps
+
+
+def gesturing(conversation, hand: str) -> np.ndarray:
+    """``(T,)`` True in the frames of the agent's phrases whose gestures use ``hand``."""
+    times, inside = frame_times(conversation), np.zeros(conversation.num_frames, dtype=bool)
+    for phrase in conversation.events.gesture_phrases:
+        if phrase.hands in (hand, "both"):
+            inside |= (times >= phrase.phrase_start) & (times < phrase.phrase_end)
+    return inside
+
+
+def stroke_travel(conversation) -> list[tuple[object, str, np.ndarray]]:
+    """``(stroke, hand, displacement (3,) in cm)`` of each hand's wrist over each beat stroke."""
+    positions, times = conversation.positions.astype(np.float64), frame_times(conversation)
+    half = conversation.config.motion.stroke_duration_s / conversation.style.speed / 2
+    travel = []
+    for stroke in conversation.events.strokes:
+        first, last = np.searchsorted(times, [stroke.time - half, stroke.time + half])
+        last = min(last, conversation.num_frames - 1)
+        for hand in ("left", "right") if stroke.hands == "both" else (stroke.hands,):
+            wrist = positions[:, JOINT_INDEX[f"{hand}_wrist"]]
+            travel.append((stroke, hand, wrist[last] - wrist[first]))
+    return travel
+
+
+def pinned_style(**values) -> ConversationConfig:
+    """A configuration whose every conversation has exactly this style."""
+    return ConversationConfig(style=StyleRanges(**{k: (v, v) for k, v in values.items()}))
 
 
 # --------------------------------------------------------------------------- seeds
@@ -153,6 +192,135 @@ def test_style_shows_in_the_motion():
     assert measured["lively"]["both_hands"] == 1.0 and measured["calm"]["both_hands"] == 0.0
 
 
+# --------------------------------------------------------------------------- where the hands go
+
+
+def test_places_of_the_hands_are_ordered_from_lap_to_chest():
+    style = Style(gesture_radius_cm=12.0, hand_height_cm=16.0, speed=1.0, symmetry=0.5,
+                  handedness=0.5, beat_amplitude_cm=15.0)
+    rest, home, centre = rest_wrist("left"), home_wrist("left", style), gesture_centre(style)
+    assert rest[1] < home[1] < centre[1] == pytest.approx(REST_WRIST[1] + 16.0)
+    assert centre[1] < 50.0  # below the sternum
+    for hand, side in (("left", 1.0), ("right", -1.0)):  # mirror images, on their own side
+        assert side * rest_wrist(hand)[0] > 0 and side * home_wrist(hand, style)[0] > 0
+        np.testing.assert_allclose(home_wrist(hand, style) * [side, 1, 1], home)
+
+
+def test_elbow_pole_turns_from_hanging_to_lifted_as_the_hand_rises():
+    n = 200
+    shoulder = np.tile([18.0, 50.0, 0.0], (n, 1))
+    low = np.tile([11.0, REST_WRIST[1], 28.0], (n, 1))  # in front of the body, never outside
+    high = low + [0.0, 30.0, 4.0]
+    np.testing.assert_allclose(elbow_pole(shoulder, low, 1.0, 25), np.tile(ELBOW_POLE_REST, (n, 1)))
+    np.testing.assert_allclose(elbow_pole(shoulder, high, 1.0, 25),
+                               np.tile(ELBOW_POLE_RAISED, (n, 1)))
+    mirrored = elbow_pole(shoulder * [-1, 1, 1], high * [-1, 1, 1], -1.0, 25)
+    np.testing.assert_allclose(mirrored, np.tile(ELBOW_POLE_RAISED * [-1, 1, 1], (n, 1)))
+    # A hand out beyond the shoulder takes the elbow further out.
+    wide = high + [20.0, 0.0, 0.0]
+    assert np.all(elbow_pole(shoulder, wide, 1.0, 25)[:, 0] > ELBOW_POLE_RAISED[0])
+
+
+def test_hands_rise_into_a_gesture_space_in_front_of_the_chest(conversation):
+    positions = conversation.positions.astype(np.float64)
+    listening = conversation.activity == Activity.B_SPEAKS
+    joints = {part: {} for part in ("wrist", "elbow", "upper_arm_tilt")}
+    for hand in ("left", "right"):
+        wrist, elbow, shoulder = (positions[:, JOINT_INDEX[f"{hand}_{j}"]]
+                                  for j in ("wrist", "elbow", "shoulder"))
+        upper_arm = elbow - shoulder
+        tilt = np.degrees(np.arccos(-upper_arm[:, 1] / np.linalg.norm(upper_arm, axis=1)))
+        for mode, frames in (("up", gesturing(conversation, hand)), ("listening", listening)):
+            for part, values in (("wrist", wrist), ("elbow", elbow), ("upper_arm_tilt", tilt)):
+                joints[part].setdefault(mode, []).append(values[frames])
+    wrist, elbow, tilt = ({mode: np.concatenate(v) for mode, v in joints[part].items()}
+                          for part in ("wrist", "elbow", "upper_arm_tilt"))
+    assert len(wrist["up"]) > 10 * conversation.fps  # seconds of gesturing, not moments
+    height, depth = np.median(wrist["up"][:, 1]), np.median(wrist["up"][:, 2])
+    assert 25.0 < height < 40.0 and 20.0 < depth < 35.0  # cm; the sternum is 50 cm up
+    assert np.percentile(wrist["up"][:, 1], 25) > REST_WRIST[1] + 8.0  # up, not in the lap
+    assert height > np.median(wrist["listening"][:, 1]) + 2.0
+    # The upper arm lifts too: the elbow comes forwards and out, away from the body.
+    elbow_out = {mode: np.median(np.abs(elbow[mode][:, 0])) for mode in elbow}
+    assert elbow_out["up"] > max(20.0, elbow_out["listening"] + 1.5)  # shoulders at x = +-18
+    assert np.median(elbow["up"][:, 2]) > 7.0  # cm in front of the shoulders
+    assert np.median(tilt["up"]) > max(18.0, np.median(tilt["listening"]) + 1.5)  # degrees
+
+
+def test_listening_hands_wait_low_with_the_elbows_under_the_shoulders(conversation):
+    positions = conversation.positions.astype(np.float64)
+    listening = conversation.activity == Activity.B_SPEAKS
+    assert np.median(positions[listening][:, WRISTS, 1]) < 32.0  # belly or lap, below the chest
+    elbow_x = np.abs(positions[listening][:, ELBOWS, 0])  # the shoulders are at x = +-18
+    assert 16.0 < np.median(elbow_x) < 21.0
+
+
+def test_hands_sink_into_the_lap_only_when_the_agent_is_silent_for_long():
+    config = ConversationConfig(turns=TurnConfig(long_silence_probability=0.6,
+                                                 long_silence_s=(7.0, 9.0)))
+    conv = generate_conversation(40.0, seed=6, config=config)
+    positions, times = conv.positions.astype(np.float64), frame_times(conv)
+    in_lap = np.all(positions[:, WRISTS, 1] < REST_WRIST[1] + 3.0, axis=1)  # both hands
+    phrases = conv.events.phrases_of("A")
+    long_gaps = 0
+    settled_after = 1.0 + HOME_DWELL_S + SETTLE_S  # s: retract (< 1 s), wait at home, settle
+    for before, after in zip(phrases, phrases[1:], strict=False):
+        if after.start - before.end > settled_after + 2.0:
+            long_gaps += 1  # in the lap until it is time to prepare (< 1 s) the next phrase
+            assert np.all(in_lap[(times > before.end + settled_after) & (times < after.start - 1)])
+    assert long_gaps >= 1
+    # ... and never soon after the agent spoke: both hands reach the lap only after they have
+    # waited at home.
+    last_end = np.array([max([p.end for p in phrases if p.end <= t], default=0.0) for t in times])
+    assert np.all(times[in_lap] - last_end[in_lap] > HOME_DWELL_S)
+
+
+def test_beats_travel_their_amplitude_at_a_speakers_speed(conversation):
+    emphasis = {accent.time: accent.emphasis for accent in conversation.events.accents_of("A")}
+    rule = np.array([stroke.amplitude_cm / (conversation.style.beat_amplitude_cm
+                                             * emphasis[stroke.accent_time])
+                     for stroke in conversation.events.strokes])
+    assert np.all((rule > 0.9 - 1e-9) & (rule < 1.1 + 1e-9))  # amplitude from emphasis, +-10 %
+    travel = stroke_travel(conversation)
+    distance = np.array([np.linalg.norm(d) for _, _, d in travel])
+    ratio = distance / np.array([stroke.amplitude_cm for stroke, _, _ in travel])
+    assert 0.85 < np.median(ratio) < 1.15 and np.percentile(ratio, 10) > 0.75
+    assert np.median(distance) > 8.0  # cm: beats a viewer can see
+    assert np.mean([d[1] < 0 for _, _, d in travel]) > 0.9  # strokes go down
+    # The wrist speed peaks as a minimum-jerk stroke does, at 1.875 x amplitude / duration
+    # (a little less, measured between frames), like a real speaker's beats: 60-200 cm/s.
+    speeds, fps = speed(conversation.positions.astype(np.float64), conversation.fps), 25
+    duration = conversation.config.motion.stroke_duration_s / conversation.style.speed
+    peaks = np.array([speeds[max(round(stroke.time * fps) - 2, 0): round(stroke.time * fps) + 1,
+                             JOINT_INDEX[f"{hand}_wrist"]].max() for stroke, hand, _ in travel])
+    predicted = np.array([1.875 * stroke.amplitude_cm / duration for stroke, _, _ in travel])
+    assert 0.85 < np.median(peaks / predicted) < 1.05
+    assert 60.0 < np.median(peaks) < 200.0 and peaks.max() < 250.0  # cm/s
+
+
+def test_stroke_forms_and_the_gesturing_hand_follow_the_style():
+    compact = pinned_style(gesture_radius_cm=0.0, hand_height_cm=15.0, speed=1.0, symmetry=0.0,
+                           handedness=1.0, beat_amplitude_cm=15.0)
+    expansive = pinned_style(gesture_radius_cm=25.0, hand_height_cm=15.0, speed=1.0,
+                             symmetry=1.0, handedness=1.0, beat_amplitude_cm=15.0)
+    outward_share = {}
+    for name, config in (("compact", compact), ("expansive", expansive)):
+        conv = generate_conversation(30.0, seed=5, config=config)
+        travel = stroke_travel(conv)
+        # An outward sweep moves the wrist away from the midline by at least 40 % of its travel.
+        outward_share[name] = np.mean([
+            (d[0] if hand == "left" else -d[0]) > 0.4 * np.linalg.norm(d) for _, hand, d in travel
+        ])
+        if name == "compact":  # right-handed, one hand at a time: the left one stays low
+            positions = conv.positions.astype(np.float64)
+            assert {p.hands for p in conv.events.gesture_phrases} == {"right"}
+            left = positions[:, JOINT_INDEX["left_wrist"], 1]
+            right = positions[gesturing(conv, "right"), JOINT_INDEX["right_wrist"], 1]
+            assert left.max() < home_wrist("left", conv.style)[1] + 3.0  # never above home
+            assert np.median(right) > left.max() + 2.0
+    assert outward_share["compact"] < 0.05 < 0.2 < outward_share["expansive"]
+
+
 # --------------------------------------------------------------------------- the rules
 
 
@@ -164,6 +332,26 @@ def test_listening_is_less_active_than_speaking(conversation):
     assert wrist_speed[listening].mean() < 0.5 * wrist_speed[speaking].mean()
     assert distance[listening][:, WRISTS].mean() < 0.85 * distance[speaking][:, WRISTS].mean()
     assert distance[listening].mean() < distance[speaking].mean()  # over all joints too
+
+
+def test_listening_is_calmer_and_closer_to_the_mean_pose_across_conversations():
+    # Pooled over several conversations (each measured from its own mean pose), so that one
+    # conversation with little listening cannot decide the outcome.
+    speeds, distances = {}, {}
+    for seed in (40, 41, 42, 43):
+        conv = generate_conversation(30.0, seed=seed)
+        positions = conv.positions.astype(np.float64)
+        for mode, code in (("speaking", Activity.A_SPEAKS), ("listening", Activity.B_SPEAKS)):
+            speeds.setdefault(mode, []).append(
+                split_by_activity(speed(positions, conv.fps)[:, WRISTS], conv.activity)[code])
+            distances.setdefault(mode, []).append(
+                split_by_activity(distance_from_mean_pose(positions), conv.activity)[code])
+    wrist_speed = {mode: np.concatenate(v).mean() for mode, v in speeds.items()}
+    distance = {mode: np.concatenate(v) for mode, v in distances.items()}
+    assert wrist_speed["listening"] < 0.5 * wrist_speed["speaking"]
+    for joints, share in ((WRISTS, 0.8), (ELBOWS, 0.85), (slice(None), 0.9)):
+        listening, speaking = distance["listening"][:, joints], distance["speaking"][:, joints]
+        assert listening.mean() < share * speaking.mean()
 
 
 @pytest.mark.parametrize("lead_s", [0.12, 0.32])

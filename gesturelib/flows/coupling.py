@@ -174,7 +174,7 @@ class AffineCoupling(_Coupling):
         log_scale = self.log_scale(raw)
         if inverse:
             return (x_b - shift) * torch.exp(-log_scale), -sum_per_sample(log_scale)
-        return x_b * torch.exp(log_scale) + shift, 0.5 * sum_per_sample(log_scale)
+        return x_b * torch.exp(log_scale) + shift, sum_per_sample(log_scale)
 
     def extra_repr(self) -> str:
         return f"{super().extra_repr()}, clamp={self.clamp}"
