@@ -39,7 +39,7 @@ from gesturelib.features import load_audio, num_frames, save_audio
 from gesturelib.skeleton import NUM_JOINTS
 
 #: Version of the generator's rules; written into every file and manifest.
-GENERATOR_VERSION = "1.0"
+GENERATOR_VERSION = "1.1"
 FILE_FORMAT = "data_synth.conversation"
 #: The shortest conversation: long enough for a phrase and its preparation.
 MIN_DURATION_S = 2.0

@@ -6,8 +6,8 @@ the one we animate), ``"B"`` the off-screen partner. The log has two halves:
 * **Speech** (drawn from the conversation seed, shared by every motion draw): :class:`Phrase`
   (an intonation phrase or a short backchannel), :class:`Syllable` and :class:`Accent` (a
   stressed syllable: louder, longer and higher than its neighbours).
-* **Motion** (drawn from the motion seed): :class:`GesturePhrase` (the hands leave the rest
-  position, gesture, and return), :class:`Stroke` (a beat: the moment of peak wrist speed) and
+* **Motion** (drawn from the motion seed): :class:`GesturePhrase` (the hands leave their home
+  or the lap, gesture, and return), :class:`Stroke` (a beat: the moment of peak wrist speed) and
   :class:`Nod` (the moment the head moves down fastest).
 
 The log is what a test or a notebook uses to check the rules; a model never sees it.
@@ -88,7 +88,8 @@ class Nod:
 @dataclass(frozen=True)
 class GesturePhrase:
     """The hands' excursion for one phrase of the agent: from leaving their previous position
-    (``start``) to being back at rest or in a hold (``end``); ``hands`` is left, right or both."""
+    (``start``) to being back at home (in front of the belly) or in a hold (``end``); ``hands`` is
+    left, right or both."""
 
     start: float
     end: float

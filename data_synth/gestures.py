@@ -394,7 +394,7 @@ def _gesture_phrase(track: _HandTrack, plan: _PhrasePlan, hand: str, next_ready:
     """
     mirror = MIRROR if hand == "left" else np.ones(3)
     beats = plan.beats
-    first_point = (beats[0].start if beats else plan.centre) * mirror
+    first_point = (beats[0].start if beats else _within_reach(plan.centre)) * mirror
     start = max(plan.ready - timing.preparation, track.last_time)
     track.hold_until(start)
     track.move(max(plan.ready, start + MIN_PREPARATION_S), first_point)

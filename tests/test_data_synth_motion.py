@@ -16,6 +16,7 @@ from data_synth import (
     measure_stroke_lead,
     resample_motion,
 )
+from data_synth.events import Stroke
 from data_synth.gestures import (
     HOME_DWELL_S,
     REST_WRIST,
@@ -63,7 +64,7 @@ def gesturing(conversation, hand: str) -> np.ndarray:
     return inside
 
 
-def stroke_travel(conversation) -> list[tuple[object, str, np.ndarray]]:
+def stroke_travel(conversation) -> list[tuple[Stroke, str, np.ndarray]]:
     """``(stroke, hand, displacement (3,) in cm)`` of each hand's wrist over each beat stroke."""
     positions, times = conversation.positions.astype(np.float64), frame_times(conversation)
     half = conversation.config.motion.stroke_duration_s / conversation.style.speed / 2
@@ -209,7 +210,7 @@ def test_places_of_the_hands_are_ordered_from_lap_to_chest():
 def test_elbow_pole_turns_from_hanging_to_lifted_as_the_hand_rises():
     n = 200
     shoulder = np.tile([18.0, 50.0, 0.0], (n, 1))
-    low = np.tile([11.0, REST_WRIST[1], 28.0], (n, 1))  # in front of the body, never outside
+    low = np.tile([11.0, REST_WRIST[1], 28.0], (n, 1))  # inside the shoulder: no extra outward
     high = low + [0.0, 30.0, 4.0]
     np.testing.assert_allclose(elbow_pole(shoulder, low, 1.0, 25), np.tile(ELBOW_POLE_REST, (n, 1)))
     np.testing.assert_allclose(elbow_pole(shoulder, high, 1.0, 25),
@@ -289,7 +290,8 @@ def test_beats_travel_their_amplitude_at_a_speakers_speed(conversation):
     assert np.mean([d[1] < 0 for _, _, d in travel]) > 0.9  # strokes go down
     # The wrist speed peaks as a minimum-jerk stroke does, at 1.875 x amplitude / duration
     # (a little less, measured between frames), like a real speaker's beats: 60-200 cm/s.
-    speeds, fps = speed(conversation.positions.astype(np.float64), conversation.fps), 25
+    fps = conversation.fps
+    speeds = speed(conversation.positions.astype(np.float64), fps)  # row r: frames r to r + 1
     duration = conversation.config.motion.stroke_duration_s / conversation.style.speed
     peaks = np.array([speeds[max(round(stroke.time * fps) - 2, 0): round(stroke.time * fps) + 1,
                              JOINT_INDEX[f"{hand}_wrist"]].max() for stroke, hand, _ in travel])
