@@ -2,17 +2,21 @@
 
 Both models are affine-coupling flows with K couplings whose conditioners are 2-hidden-layer ReLU
 MLPs. Ours adds Glow's ActNorm and LU-decomposed invertible linear layer in each step; zuko's
-RealNVP alternates which coordinate is transformed. zuko's hidden width is the smallest that gives
-it at least as many parameters as ours, so it never has the smaller budget.
+RealNVP alternates which coordinate is transformed. Ours runs twice: with the linear layers
+starting as random rotations (Glow's choice, the library default) and as the reversing
+permutation (``linear_init="reverse"``, which starts as RealNVP's alternation). zuko's hidden width
+is the smallest that gives it at least as many parameters as ours, so it never has the smaller
+budget.
 
 Both see the same training set, the same mini-batches in the same order, the same optimiser
 (Adam, constant learning rate) and the same number of steps; the negative log-likelihood is
-measured on a held-out set drawn with another seed. Where the density is known in closed form
-the script also prints its entropy, the best NLL any model can reach.
+measured on a held-out set drawn with another seed at several points of training, to show both
+how fast and how far each model learns. Where the density is known in closed form the script
+also prints its entropy, the best NLL any model can reach.
 
 Usage:
-    .venv/bin/python benchmarks/flows_vs_reference.py                 # about 10 minutes on 2 cores
-    .venv/bin/python benchmarks/flows_vs_reference.py --steps 300 --seeds 1   # smoke run
+    .venv/bin/python benchmarks/flows_vs_reference.py          # about 40 minutes on 2 idle cores
+    .venv/bin/python benchmarks/flows_vs_reference.py --checkpoints 100 300 --seeds 1  # smoke run
 """
 
 from __future__ import annotations
@@ -38,12 +42,12 @@ def count_parameters(model: torch.nn.Module) -> int:
     return sum(p.numel() for p in model.parameters())
 
 
-def build_ours(steps: int, hidden: int, seed: int) -> tuple[torch.nn.Module, callable]:
-    flow = glow(2, steps, hidden, seed=seed)
+def build_ours(steps: int, hidden: int, seed: int, linear_init: str):
+    flow = glow(2, steps, hidden, seed=seed, linear_init=linear_init)
     return flow, flow.log_prob
 
 
-def build_zuko(steps: int, budget: int, seed: int) -> tuple[torch.nn.Module, callable]:
+def build_zuko(steps: int, budget: int, seed: int):
     """RealNVP with the smallest hidden width whose parameter count is >= ``budget``."""
     hidden = 1
     while True:
@@ -54,75 +58,100 @@ def build_zuko(steps: int, budget: int, seed: int) -> tuple[torch.nn.Module, cal
         hidden += 1
 
 
-def train(model, log_prob, train_x, batch, steps, lr, seed) -> float:
-    """Adam on the mean NLL of mini-batches drawn (seeded) from ``train_x``; returns seconds."""
-    optimiser = torch.optim.Adam(model.parameters(), lr=lr)
-    order = torch.Generator().manual_seed(seed)
-    start = time.perf_counter()
-    for _ in range(steps):
-        index = torch.randint(0, train_x.shape[0], (batch,), generator=order)
-        loss = -log_prob(train_x[index]).mean()
-        optimiser.zero_grad()
-        loss.backward()
-        optimiser.step()
-    return time.perf_counter() - start
-
-
 @torch.no_grad()
 def held_out_nll(log_prob, test_x) -> float:
     return -torch.cat([log_prob(chunk) for chunk in test_x.split(5000)]).mean().item()
 
 
+def train(model, log_prob, train_x, test_x, batch, checkpoints, lr, seed):
+    """Adam on the mean NLL of mini-batches drawn (seeded) from ``train_x``.
+
+    Returns the held-out NLL at each checkpoint (a number of steps) and the training seconds.
+    """
+    optimiser = torch.optim.Adam(model.parameters(), lr=lr)
+    order = torch.Generator().manual_seed(seed)
+    nlls, seconds = [], 0.0
+    for step in range(1, max(checkpoints) + 1):
+        start = time.perf_counter()
+        index = torch.randint(0, train_x.shape[0], (batch,), generator=order)
+        loss = -log_prob(train_x[index]).mean()
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+        seconds += time.perf_counter() - start
+        if step in checkpoints:
+            nlls.append(held_out_nll(log_prob, test_x))
+    return nlls, seconds
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--densities", nargs="+", default=list(toy_densities.TOY_DENSITIES))
-    parser.add_argument("--steps", type=int, default=3000, help="training steps")
+    parser.add_argument(
+        "--checkpoints",
+        nargs="+",
+        type=int,
+        default=[2500, 5000, 10000],
+        help="training steps after which the held-out NLL is measured (the last ends training)",
+    )
     parser.add_argument("--flow-steps", type=int, default=8, help="couplings K")
     parser.add_argument("--hidden", type=int, default=64, help="our conditioner width")
     parser.add_argument("--batch", type=int, default=256)
     parser.add_argument("--lr", type=float, default=1e-3)
-    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument(
+        "--threads", type=int, default=None, help="torch threads (default: torch's)"
+    )
     args = parser.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    checkpoints = sorted(set(args.checkpoints))
 
     print(
-        f"K={args.flow_steps} couplings, {args.steps} Adam steps (lr {args.lr}), batch "
-        f"{args.batch}, {TRAIN_SIZE} training / {TEST_SIZE} held-out points, "
-        f"{args.seeds} seeds, torch threads {torch.get_num_threads()}\n"
+        f"K={args.flow_steps} couplings, Adam (constant lr {args.lr}), batch {args.batch}, "
+        f"{TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds 0..{args.seeds - 1}, "
+        f"torch threads {torch.get_num_threads()}; held-out NLL in nats, mean ± sd over seeds\n"
     )
-    header = (
-        f"{'density':16} {'model':14} {'params':>7} {'held-out NLL (mean ± sd)':>26} {'train s':>8}"
-    )
+    columns = "".join(f"{f'after {c} steps':>18}" for c in checkpoints)
+    header = f"{'density':16} {'model':24} {'params':>7}{columns} {'train s':>8}"
     print(header)
     print("-" * len(header))
+    models = {
+        "zuko RealNVP": None,
+        "gesturelib Glow rotation": "rotation",
+        "gesturelib Glow reverse": "reverse",
+    }
     for name in args.densities:
         sampler = toy_densities.TOY_DENSITIES[name]
         train_x = sampler(TRAIN_SIZE, generator=1000)
         test_x = sampler(TEST_SIZE, generator=2000)
-        results = {"gesturelib Glow": [], "zuko RealNVP": []}
-        seconds = {key: 0.0 for key in results}
+        results = {key: [] for key in models}
+        seconds = dict.fromkeys(models, 0.0)
         params = {}
         for seed in range(args.seeds):
-            ours, ours_log_prob = build_ours(args.flow_steps, args.hidden, seed)
-            theirs, theirs_log_prob = build_zuko(args.flow_steps, count_parameters(ours), seed)
-            for key, model, log_prob in [
-                ("gesturelib Glow", ours, ours_log_prob),
-                ("zuko RealNVP", theirs, theirs_log_prob),
-            ]:
-                params[key] = count_parameters(model)
-                seconds[key] += train(
-                    model, log_prob, train_x, args.batch, args.steps, args.lr, seed
+            for key, linear_init in models.items():
+                ours = build_ours(args.flow_steps, args.hidden, seed, linear_init or "rotation")
+                model, log_prob = (
+                    build_zuko(args.flow_steps, count_parameters(ours[0]), seed)
+                    if linear_init is None
+                    else ours
                 )
-                results[key].append(held_out_nll(log_prob, test_x))
-        for key, nlls in results.items():
-            spread = statistics.stdev(nlls) if len(nlls) > 1 else 0.0
-            figure = f"{statistics.mean(nlls):.3f} ± {spread:.3f}"
-            print(
-                f"{name:16} {key:14} {params[key]:7d} {figure:>26} {seconds[key] / args.seeds:8.1f}"
-            )
+                params[key] = count_parameters(model)
+                nlls, spent = train(
+                    model, log_prob, train_x, test_x, args.batch, checkpoints, args.lr, seed
+                )
+                results[key].append(nlls)
+                seconds[key] += spent
+        for key, runs in results.items():
+            figures = ""
+            for column in zip(*runs, strict=True):
+                spread = statistics.stdev(column) if len(column) > 1 else 0.0
+                figures += f"{f'{statistics.mean(column):.3f} ± {spread:.3f}':>18}"
+            print(f"{name:16} {key:24} {params[key]:7d}{figures} {seconds[key] / args.seeds:8.1f}")
         if name in TRUE_LOG_PROB:
             entropy = -TRUE_LOG_PROB[name](test_x.double()).mean().item()
-            print(f"{name:16} {'true density':14} {'':7} {entropy:26.3f}")
-        print()
+            print(f"{name:16} {'true density (entropy)':24} {'':7}{f'{entropy:.3f}':>18}")
+        print(flush=True)
 
 
 if __name__ == "__main__":

@@ -58,6 +58,7 @@ BIJECTIONS = {
     "actnorm_sequence": (lambda: ActNorm(DIM), True, False),
     "linear_lu": (lambda: InvertibleLinear(DIM, lu=True), False, False),
     "linear_plain": (lambda: InvertibleLinear(DIM, lu=False), True, False),
+    "linear_lu_reverse": (lambda: InvertibleLinear(DIM, init="reverse"), True, False),
     "affine_mlp": (lambda: AffineCoupling(DIM, COND, hidden=8), False, True),
     "affine_mlp_sequence": (lambda: AffineCoupling(DIM, COND, hidden=8), True, True),
     "affine_lstm": (lambda: AffineCoupling(DIM, COND, 8, "lstm"), True, True),
@@ -116,6 +117,15 @@ def test_logdet_matches_autograd_jacobian(name, inverse):
         torch.testing.assert_close(torch.linalg.slogdet(jac)[1], logdet[b], atol=1e-9, rtol=1e-9)
 
 
+@pytest.mark.parametrize("coupling", [AffineCoupling, AdditiveCoupling])
+@pytest.mark.parametrize("conditioner", ["mlp", "lstm", "gru"])
+def test_a_new_coupling_is_the_identity(coupling, conditioner):
+    x, cond = torch.randn(BATCH, FRAMES, DIM), torch.randn(BATCH, FRAMES, COND)
+    y, logdet = coupling(DIM, COND, 8, conditioner)(x, cond)[:2]
+    torch.testing.assert_close(y, x, atol=0, rtol=0)
+    torch.testing.assert_close(logdet, torch.zeros(BATCH), atol=0, rtol=0)
+
+
 # ---------------------------------------------------------------------------------- ActNorm
 
 
@@ -169,6 +179,19 @@ def test_linear_starts_as_a_seeded_rotation(lu):
     assert abs(torch.linalg.det(weight).item() - 1.0) < 1e-5
     again = InvertibleLinear(6, lu=lu, generator=torch.Generator().manual_seed(3))
     torch.testing.assert_close(again.weight_matrix(), layer.weight_matrix())
+
+
+@pytest.mark.parametrize("lu", [True, False])
+def test_linear_reverse_init_reverses_the_features(lu):
+    layer = InvertibleLinear(5, lu=lu, init="reverse")
+    x = torch.randn(3, 5)
+    y, logdet = layer(x)
+    torch.testing.assert_close(y, x.flip(-1))
+    torch.testing.assert_close(logdet, torch.zeros(3))
+    flow = glow(2, 2, 8, linear_init="reverse")
+    torch.testing.assert_close(
+        flow.steps[1].linear.weight_matrix(), torch.tensor([[0.0, 1], [1, 0]])
+    )
 
 
 @pytest.mark.parametrize("lu", [True, False])
@@ -362,8 +385,10 @@ def test_bad_inputs_raise_clear_errors():
     bad_cond[5, 0] = math.inf
     with pytest.raises(ValueError, match=r"cond contains 1 non-finite.*first: \[5\]"):
         flow.log_prob(x, bad_cond)
-    with pytest.raises(TypeError, match="dtype"):
+    with pytest.raises(TypeError, match="x has dtype torch.float64"):
         flow.log_prob(x.double(), cond.double())
+    with pytest.raises(TypeError, match="cond has dtype torch.float64"):
+        flow.log_prob(x, cond.double())
     with pytest.raises(ValueError, match="takes no state"):
         flow(x, cond, state=())
     with pytest.raises(ValueError, match="temperature"):
@@ -395,6 +420,8 @@ def test_bad_construction_raises_clear_errors():
         AffineCoupling(1)
     with pytest.raises(ValueError, match="unknown conditioner"):
         glow(4, 2, 8, conditioner="transformer")
+    with pytest.raises(ValueError, match="unknown init"):
+        InvertibleLinear(4, init="identity")
     with pytest.raises(ValueError, match="unknown coupling"):
         FlowStep(4, coupling="spline")
     with pytest.raises(ValueError, match="df"):

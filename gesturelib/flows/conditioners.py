@@ -120,21 +120,34 @@ class _RecurrentConditioner(nn.Module):
 
     def initial_state(self, batch_size: int, device=None, dtype=None) -> ConditionerState:
         """The zero state for ``batch_size`` sequences (what ``state=None`` stands for)."""
-        raise NotImplementedError
+        zeros = torch.zeros(self.num_layers, batch_size, self.hidden, device=device, dtype=dtype)
+        return (zeros, zeros.clone()) if self._is_lstm else zeros
 
-    def _state_tensors(self, state) -> tuple[torch.Tensor, ...]:
-        raise NotImplementedError
+    @property
+    def _is_lstm(self) -> bool:
+        return self.rnn_class is nn.LSTM
 
     def _check_state(self, state, batch_size: int) -> None:
         wanted = (self.num_layers, batch_size, self.hidden)
-        tensors = self._state_tensors(state)
-        if any(not isinstance(t, torch.Tensor) or tuple(t.shape) != wanted for t in tensors):
-            got = [
-                tuple(t.shape) if isinstance(t, torch.Tensor) else type(t).__name__ for t in tensors
-            ]
+        form = "a tuple (h, c) of two tensors" if self._is_lstm else "one tensor h"
+        if self._is_lstm:
+            tensors = tuple(state) if isinstance(state, tuple | list) and len(state) == 2 else None
+        else:
+            tensors = (state,) if isinstance(state, torch.Tensor) else None
+        if tensors is None or any(
+            not isinstance(t, torch.Tensor) or tuple(t.shape) != wanted for t in tensors
+        ):
+            got = (
+                [
+                    tuple(t.shape) if isinstance(t, torch.Tensor) else type(t).__name__
+                    for t in tensors
+                ]
+                if tensors is not None
+                else type(state).__name__
+            )
             raise ValueError(
-                f"{self.state_description} each of shape (num_layers, B, hidden) = {wanted}, "
-                f"got {got}"
+                f"the state of this {self.rnn_class.__name__} conditioner must be {form} of shape "
+                f"(num_layers, B, hidden) = {wanted}, got {got}"
             )
 
 
@@ -145,19 +158,6 @@ class LSTMConditioner(_RecurrentConditioner):
     """
 
     rnn_class = nn.LSTM
-    state_description = "an LSTM conditioner's state must be a tuple (h, c),"
-
-    def initial_state(self, batch_size: int, device=None, dtype=None):
-        zeros = torch.zeros(self.num_layers, batch_size, self.hidden, device=device, dtype=dtype)
-        return zeros, zeros.clone()
-
-    def _state_tensors(self, state):
-        if not isinstance(state, tuple | list) or len(state) != 2:
-            raise ValueError(
-                "an LSTM conditioner's state must be a tuple (h, c) of two tensors of shape "
-                f"(num_layers, B, hidden), got {type(state).__name__}"
-            )
-        return tuple(state)
 
 
 class GRUConditioner(_RecurrentConditioner):
@@ -167,13 +167,6 @@ class GRUConditioner(_RecurrentConditioner):
     """
 
     rnn_class = nn.GRU
-    state_description = "a GRU conditioner's state must be one tensor h"
-
-    def initial_state(self, batch_size: int, device=None, dtype=None):
-        return torch.zeros(self.num_layers, batch_size, self.hidden, device=device, dtype=dtype)
-
-    def _state_tensors(self, state):
-        return (state,)
 
 
 CONDITIONERS: dict[str, type[nn.Module]] = {

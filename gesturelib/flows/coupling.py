@@ -66,17 +66,16 @@ class _Coupling(nn.Module):
             conditioner = make_conditioner(
                 conditioner, in_features, out_features, hidden, num_layers
             )
-        elif (
-            getattr(conditioner, "in_features", None),
-            getattr(conditioner, "out_features", None),
-        ) != (
-            in_features,
-            out_features,
-        ) or not hasattr(conditioner, "recurrent"):
-            raise ValueError(
-                f"this coupling needs a conditioner with in_features={in_features}, "
-                f"out_features={out_features} and a `recurrent` attribute"
+        else:
+            sizes = (
+                getattr(conditioner, "in_features", None),
+                getattr(conditioner, "out_features", None),
             )
+            if sizes != (in_features, out_features) or not hasattr(conditioner, "recurrent"):
+                raise ValueError(
+                    f"this coupling needs a conditioner with in_features={in_features}, "
+                    f"out_features={out_features} and a `recurrent` attribute; got {sizes}"
+                )
         self.conditioner = conditioner
 
     @property

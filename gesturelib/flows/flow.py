@@ -66,6 +66,8 @@ class FlowStep(nn.Module):
         num_layers: hidden layers of the MLP, or stacked recurrent layers.
         clamp: bound of the affine coupling's log-scale (default 2.0); affine only.
         generator: torch generator for the linear layer's initial rotation.
+        linear_init: ``"rotation"`` (random, default) or ``"reverse"``: the linear layer's initial
+            matrix (see :mod:`gesturelib.flows.linear`).
     """
 
     def __init__(
@@ -80,6 +82,7 @@ class FlowStep(nn.Module):
         num_layers: int = 2,
         clamp: float | None = None,
         generator: torch.Generator | None = None,
+        linear_init: str = "rotation",
     ):
         super().__init__()
         if coupling not in COUPLINGS:
@@ -90,7 +93,7 @@ class FlowStep(nn.Module):
             )
         options = {"clamp": clamp} if clamp is not None else {}
         self.actnorm = ActNorm(dim)
-        self.linear = InvertibleLinear(dim, lu=lu, generator=generator)
+        self.linear = InvertibleLinear(dim, lu=lu, generator=generator, init=linear_init)
         self.coupling = COUPLINGS[coupling](
             dim, cond_dim, hidden, conditioner, num_layers, **options
         )
@@ -286,10 +289,12 @@ class Flow(nn.Module):
             if cond is not None:
                 check_finite(cond, "cond")
         dtype = next(self.parameters()).dtype
-        if x.dtype != dtype:
-            raise TypeError(
-                f"{name} has dtype {x.dtype} but the flow's parameters are {dtype}; convert one of them"
-            )
+        for tensor, label in ((x, name), (cond, "cond")):
+            if tensor is not None and tensor.dtype != dtype:
+                raise TypeError(
+                    f"{label} has dtype {tensor.dtype} but the flow's parameters are {dtype}; "
+                    "convert one of them (e.g. flow.double() or tensor.float())"
+                )
         if state is None:
             return
         if not self.recurrent:
@@ -333,6 +338,7 @@ def glow(
     *,
     coupling: str = "affine",
     lu: bool = True,
+    linear_init: str = "rotation",
     num_layers: int = 2,
     clamp: float | None = None,
     base: str = "normal",
@@ -350,6 +356,9 @@ def glow(
             (Ye et al.); recurrent conditioners make a flow over sequences ``(B, T, D)``.
         coupling: ``"affine"`` or ``"additive"``.
         lu: LU-decomposed (True) or plain (False) invertible linear layers.
+        linear_init: ``"rotation"`` (random, Glow's choice and the default) or ``"reverse"``
+            (alternating halves, as RealNVP; a better start in 2D, see
+            :mod:`gesturelib.flows.linear`).
         num_layers: hidden layers of each MLP, or stacked layers of each LSTM/GRU.
         clamp: bound of the affine log-scale (default 2.0, see :mod:`gesturelib.flows.coupling`).
         base: ``"normal"`` (N(0, I)) or ``"student_t"`` (multivariate Student's t, needs ``df``).
@@ -380,6 +389,7 @@ def glow(
                 lu=lu,
                 num_layers=num_layers,
                 clamp=clamp,
+                linear_init=linear_init,
             )
             for _ in range(steps)
         ]
