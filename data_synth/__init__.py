@@ -53,7 +53,13 @@ from data_synth.conversation import (
     resample_motion,
     save_conversation,
 )
-from data_synth.dataset import load_dataset, load_split, read_manifest, write_dataset
+from data_synth.dataset import (
+    ensure_dataset,
+    load_dataset,
+    load_split,
+    read_manifest,
+    write_dataset,
+)
 from data_synth.emphasis import emphasis_envelope, measure_stroke_lead
 from data_synth.events import Events
 from data_synth.style import Style
@@ -70,6 +76,7 @@ __all__ = [
     "TurnConfig",
     "VoiceConfig",
     "emphasis_envelope",
+    "ensure_dataset",
     "generate_conversation",
     "load_conversation",
     "load_dataset",

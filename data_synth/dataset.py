@@ -152,8 +152,60 @@ def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
         "config": config.to_dict(),
         "splits": splits,
     }
-    manifest_path.write_text(json.dumps(manifest, indent=1))
-    return manifest
+    text = json.dumps(manifest, indent=1)
+    manifest_path.write_text(text)
+    return json.loads(text)  # exactly what read_manifest will give (tuples read back as lists)
+
+
+def ensure_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
+                   conversation_s: float = FULL_CONVERSATION_S,
+                   config: ConversationConfig | None = None, progress: bool = True) -> dict:
+    """The dataset these arguments describe, in ``out_dir``: reused if it is there, else written.
+
+    This is what notebooks call, so that a dataset is generated once and shared by all of them,
+    yet never silently reused once it is stale. An existing dataset is reused only if its manifest
+    records the same seed, sizes and generator configuration *and* the current generator and
+    file-format versions; otherwise it is regenerated in place, saying why, which deletes only the
+    files the old manifest lists (see :func:`write_dataset`). Anything else is left for a person
+    to decide: a damaged manifest, or files in the way without one (an interrupted write, or
+    someone else's files), raise as in :func:`write_dataset`.
+
+    Args: as :func:`write_dataset` (without ``overwrite``).
+    Returns:
+        The manifest of the dataset now in ``out_dir``.
+    Raises:
+        FileExistsError: if ``out_dir`` holds a damaged manifest, or files this would write but
+            no manifest. Nothing is written then.
+        ValueError: for bad sizes or seeds, or if ``out_dir`` is a file.
+    """
+    config = ConversationConfig() if config is None else config
+    wanted = {
+        "format": DATASET_FORMAT,
+        "generator_version": GENERATOR_VERSION,
+        "conversation_format": FILE_FORMAT,
+        "seed": seed,
+        "minutes": minutes,
+        "conversation_s": conversation_s,
+        "config": config.to_dict(),
+    }
+    wanted = json.loads(json.dumps(wanted))  # as a manifest reads back: tuples become lists
+    stale = False
+    if (Path(out_dir) / MANIFEST_NAME).is_file():
+        try:
+            manifest = read_manifest(out_dir)
+        except ValueError as error:
+            raise FileExistsError(f"{error}; delete the folder or regenerate it with "
+                                  f"`python -m data_synth --out {out_dir} --overwrite`") from error
+        differences = [key for key, value in wanted.items() if manifest.get(key) != value]
+        if not differences:
+            return manifest
+        print(f"Regenerating the dataset in {out_dir}: it was made with different "
+              + ", ".join(f"{key} ({manifest.get(key)!r}, now {value!r})" if key != "config"
+                          else "generator settings" for key, value in wanted.items()
+                          if key in differences))
+        stale = True
+    return write_dataset(out_dir, minutes, seed, conversation_s, config, overwrite=stale,
+                         progress=progress)
 
 
 def _remove_old_dataset(out_dir: Path, manifest_path: Path, keep: set[Path]) -> None:

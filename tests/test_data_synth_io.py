@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from data_synth import (
+    ensure_dataset,
     generate_conversation,
     load_conversation,
     load_dataset,
@@ -159,6 +160,50 @@ def test_overwriting_keeps_unrelated_files(tmp_path):
     assert notes.read_text() == "mine"
     assert not (out / "test" / "conv_0003.wav").exists()  # the old dataset's extra files went
     assert {len(v) for v in load_dataset(out).values()} == {1}
+
+
+def test_ensure_dataset_reuses_a_matching_dataset_and_regenerates_a_stale_one(tmp_path, capsys):
+    out = tmp_path / "data"
+    first = ensure_dataset(out, 0.3, 1, conversation_s=6.0, progress=False)
+    stamp = (out / "manifest.json").stat().st_mtime_ns
+    assert ensure_dataset(out, 0.3, 1, conversation_s=6.0, progress=False) == first
+    assert (out / "manifest.json").stat().st_mtime_ns == stamp  # reused, not rewritten
+    assert capsys.readouterr().out == ""
+
+    # A dataset made by an older generator is regenerated, and the user's own files stay.
+    notes = out / "train" / "notes.txt"
+    notes.write_text("mine")
+    manifest = json.loads((out / "manifest.json").read_text())
+    manifest["generator_version"] = "0.9"
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    again = ensure_dataset(out, 0.3, 1, conversation_s=6.0, progress=False)
+    assert "generator_version ('0.9', now" in capsys.readouterr().out
+    assert again["generator_version"] == first["generator_version"]
+    assert notes.read_text() == "mine"
+
+    # So is one of another size or seed, deleting the files only the old one had.
+    ensure_dataset(out, 0.4, 1, conversation_s=6.0, progress=False)
+    assert "minutes (0.3, now 0.4)" in capsys.readouterr().out
+    assert (out / "test" / "conv_0003.wav").exists()
+    ensure_dataset(out, 0.3, 1, conversation_s=6.0, progress=False)
+    assert not (out / "test" / "conv_0003.wav").exists()
+    assert load_dataset(out)["train"][0].conversation_seed == first["splits"]["train"][0][
+        "conversation_seed"
+    ]
+
+
+def test_ensure_dataset_leaves_damaged_or_foreign_folders_to_a_person(tmp_path):
+    out = tmp_path / "data"
+    (out / "train").mkdir(parents=True)
+    (out / "train" / "conv_0000.wav").write_bytes(b"someone else's")
+    with pytest.raises(FileExistsError, match="conv_0000.wav"):
+        ensure_dataset(out, 0.3, 0, conversation_s=6.0, progress=False)
+    assert (out / "train" / "conv_0000.wav").read_bytes() == b"someone else's"
+
+    (out / "manifest.json").write_text("{not json")
+    with pytest.raises(FileExistsError, match="damaged.*--overwrite"):
+        ensure_dataset(out, 0.3, 0, conversation_s=6.0, progress=False)
+    assert (out / "train" / "conv_0000.wav").read_bytes() == b"someone else's"
 
 
 def test_writing_refuses_files_in_the_way(tmp_path):
