@@ -139,22 +139,30 @@ def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
                       for kind, path in conversation_paths(stem).items()},
         })
     manifest = {
+        **_provenance(minutes, seed, conversation_s, config),
+        "fps": config.fps,
+        "sample_rate": config.sample_rate,
+        "durations_s": {split: sum(e["duration_s"] for e in entries)
+                        for split, entries in splits.items()},
+        "splits": splits,
+    }
+    text = json.dumps(manifest, indent=1)
+    manifest_path.write_text(text)
+    return json.loads(text)  # exactly what read_manifest will give (tuples read back as lists)
+
+
+def _provenance(minutes: float, seed: int, conversation_s: float,
+                config: ConversationConfig) -> dict:
+    """The manifest entries that decide a dataset's content: same entries, same files."""
+    return {
         "format": DATASET_FORMAT,
         "generator_version": GENERATOR_VERSION,
         "conversation_format": FILE_FORMAT,
         "seed": seed,
         "minutes": minutes,
         "conversation_s": conversation_s,
-        "fps": config.fps,
-        "sample_rate": config.sample_rate,
-        "durations_s": {split: sum(e["duration_s"] for e in entries)
-                        for split, entries in splits.items()},
         "config": config.to_dict(),
-        "splits": splits,
     }
-    text = json.dumps(manifest, indent=1)
-    manifest_path.write_text(text)
-    return json.loads(text)  # exactly what read_manifest will give (tuples read back as lists)
 
 
 def ensure_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
@@ -179,16 +187,8 @@ def ensure_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
         ValueError: for bad sizes or seeds, or if ``out_dir`` is a file.
     """
     config = ConversationConfig() if config is None else config
-    wanted = {
-        "format": DATASET_FORMAT,
-        "generator_version": GENERATOR_VERSION,
-        "conversation_format": FILE_FORMAT,
-        "seed": seed,
-        "minutes": minutes,
-        "conversation_s": conversation_s,
-        "config": config.to_dict(),
-    }
-    wanted = json.loads(json.dumps(wanted))  # as a manifest reads back: tuples become lists
+    # As a manifest reads back: tuples become lists.
+    wanted = json.loads(json.dumps(_provenance(minutes, seed, conversation_s, config)))
     stale = False
     if (Path(out_dir) / MANIFEST_NAME).is_file():
         try:
