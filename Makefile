@@ -29,9 +29,10 @@ $(STAMP): requirements-lock.txt pyproject.toml
 demo: setup
 	$(BIN)/python -m gesturelib demo --out $(OUT)
 
-## make test: lint, unit tests and every notebook executed in quick mode
+## make test: lint, format check, unit tests and every notebook executed in quick mode
 test: setup
 	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
 	GESTURELIB_QUICK=1 MPLBACKEND=Agg $(BIN)/python -m pytest tests notebooks \
 		--nbval-lax --nbval-current-env --nbval-cell-timeout=300
 

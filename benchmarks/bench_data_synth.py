@@ -35,16 +35,25 @@ def stages(duration_s: float) -> list[tuple[str, float]]:
     n_samples = int(duration_s * config.sample_rate)
     turns_s, utterances = timed(lambda: sample_turns(duration_s, config.turns, rng))
     voices = draw_voices(config.voice, rng)
-    plan_s, plans = timed(lambda: [plan_speech(utterances, s, config.voice, duration_s, rng)
-                                   for s in "AB"])
-    audio_s, tracks = timed(lambda: [
-        synthesize_speech(plan, voices[plan.speaker], n_samples, config.sample_rate, rng)
-        for plan in plans])
+    plan_s, plans = timed(
+        lambda: [plan_speech(utterances, s, config.voice, duration_s, rng) for s in "AB"]
+    )
+    audio_s, tracks = timed(
+        lambda: [
+            synthesize_speech(plan, voices[plan.speaker], n_samples, config.sample_rate, rng)
+            for plan in plans
+        ]
+    )
     mix_s, _ = timed(lambda: mix(tracks, config.voice, rng))
     conversation = generate_conversation(duration_s, seed=0)
     motion_s, _ = timed(lambda: resample_motion(conversation, 1))
-    return [("turn-taking", turns_s), ("syllables, accents, pitch", plan_s),
-            ("source-filter synthesis", audio_s), ("mix", mix_s), ("motion", motion_s)]
+    return [
+        ("turn-taking", turns_s),
+        ("syllables, accents, pitch", plan_s),
+        ("source-filter synthesis", audio_s),
+        ("mix", mix_s),
+        ("motion", motion_s),
+    ]
 
 
 def main() -> None:
@@ -56,8 +65,11 @@ def main() -> None:
     for name, stage_seconds in stages(minutes * 60.0):
         print(f"{'  ' + name:<55} {stage_seconds:8.2f}")
     with tempfile.TemporaryDirectory() as folder:
-        seconds, manifest = timed(lambda: write_dataset(
-            folder, FULL_MINUTES, seed=0, conversation_s=FULL_CONVERSATION_S, progress=False))
+        seconds, manifest = timed(
+            lambda: write_dataset(
+                folder, FULL_MINUTES, seed=0, conversation_s=FULL_CONVERSATION_S, progress=False
+            )
+        )
     n = sum(len(entries) for entries in manifest["splits"].values())
     what = f"full dataset on disk ({FULL_MINUTES:g} min, {n} conversations)"
     verdict = "ok" if seconds < 60.0 else "MISSED"

@@ -29,8 +29,14 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def _check_value(value, where: str, low: float | None = None, high: float | None = None,
-                 low_open: bool = False, integer: bool = False) -> None:
+def _check_value(
+    value,
+    where: str,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    integer: bool = False,
+) -> None:
     """``value`` must be a finite number in ``[low, high]`` (``(low, high]`` if ``low_open``)."""
     if integer and not (isinstance(value, int) and not isinstance(value, bool)):
         raise ValueError(f"{where} must be an integer, got {value!r}")
@@ -124,8 +130,13 @@ class TurnConfig:
         for name in ("phrase_pause_s", "turn_gap_s", "overlap_s", "long_silence_s"):
             _check_range(self, name, 0.0, low_open=True)
         _check_range(self, "lead_in_s", 0.0)
-        for name in ("overlap_probability", "long_silence_probability", "keep_turn_probability",
-                     "backchannel_probability", "first_speaker_a_probability"):
+        for name in (
+            "overlap_probability",
+            "long_silence_probability",
+            "keep_turn_probability",
+            "backchannel_probability",
+            "first_speaker_a_probability",
+        ):
             _probability(self, name)
         if self.overlap_probability + self.long_silence_probability > 1.0:
             raise ValueError(
@@ -252,8 +263,13 @@ class MotionConfig:
 
     def __post_init__(self):
         _non_negative(self, "stroke_lead_s")
-        for name in ("stroke_duration_s", "rebound_s", "preparation_s", "retraction_s",
-                     "nod_duration_s"):
+        for name in (
+            "stroke_duration_s",
+            "rebound_s",
+            "preparation_s",
+            "retraction_s",
+            "nod_duration_s",
+        ):
             _check_number(self, name, 0.05)
         _non_negative(self, "stroke_timing_jitter_s")
         _probability(self, "accent_nod_probability")
@@ -308,8 +324,12 @@ class ConversationConfig:
     fps: int = FPS
 
     def __post_init__(self):
-        for name, kind in (("turns", TurnConfig), ("voice", VoiceConfig),
-                           ("motion", MotionConfig), ("style", StyleRanges)):
+        for name, kind in (
+            ("turns", TurnConfig),
+            ("voice", VoiceConfig),
+            ("motion", MotionConfig),
+            ("style", StyleRanges),
+        ):
             if not isinstance(getattr(self, name), kind):
                 raise ValueError(
                     f"ConversationConfig.{name} must be a {kind.__name__}, "
@@ -346,17 +366,23 @@ class ConversationConfig:
     @classmethod
     def from_dict(cls, data: dict) -> ConversationConfig:
         """Inverse of :meth:`to_dict`; unknown or missing keys raise ``ValueError``."""
-        parts = {"turns": TurnConfig, "voice": VoiceConfig, "motion": MotionConfig,
-                 "style": StyleRanges}
+        parts = {
+            "turns": TurnConfig,
+            "voice": VoiceConfig,
+            "motion": MotionConfig,
+            "style": StyleRanges,
+        }
         _check_keys(data, cls, "config")
         kwargs = {}
         for name, value in data.items():
             if name in parts:
                 _check_keys(value, parts[name], f"config[{name!r}]")
-                kwargs[name] = parts[name](**{
-                    key: tuple(item) if isinstance(item, list) else item
-                    for key, item in value.items()
-                })
+                kwargs[name] = parts[name](
+                    **{
+                        key: tuple(item) if isinstance(item, list) else item
+                        for key, item in value.items()
+                    }
+                )
             else:
                 kwargs[name] = value
         return cls(**kwargs)

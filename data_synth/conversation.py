@@ -101,8 +101,13 @@ def _stream(seed: int, stream: int) -> np.random.Generator:
     return np.random.default_rng([seed, stream])
 
 
-def generate_conversation(duration_s: float, seed: int, config: ConversationConfig | None = None,
-                          *, motion_seed: int | None = None) -> Conversation:
+def generate_conversation(
+    duration_s: float,
+    seed: int,
+    config: ConversationConfig | None = None,
+    *,
+    motion_seed: int | None = None,
+) -> Conversation:
     """Generate a dyadic conversation and the agent's motion.
 
     Args:
@@ -113,10 +118,15 @@ def generate_conversation(duration_s: float, seed: int, config: ConversationConf
     Returns:
         The :class:`Conversation`. The same seeds and config give identical arrays.
     """
-    if isinstance(duration_s, bool) or not isinstance(duration_s, (int, float)) \
-            or not math.isfinite(duration_s) or duration_s < MIN_DURATION_S:
+    if (
+        isinstance(duration_s, bool)
+        or not isinstance(duration_s, (int, float))
+        or not math.isfinite(duration_s)
+        or duration_s < MIN_DURATION_S
+    ):
         raise ValueError(
-            f"duration_s must be a number of seconds >= {MIN_DURATION_S}, got {duration_s!r}")
+            f"duration_s must be a number of seconds >= {MIN_DURATION_S}, got {duration_s!r}"
+        )
     seed = _check_seed(seed, "seed")
     motion_seed = seed if motion_seed is None else _check_seed(motion_seed, "motion_seed")
     config = ConversationConfig() if config is None else config
@@ -128,8 +138,7 @@ def generate_conversation(duration_s: float, seed: int, config: ConversationConf
     utterances = sample_turns(duration_s, config.turns, _stream(seed, _TURNS))
     voices = draw_voices(config.voice, _stream(seed, _VOICES))
     plans = {
-        speaker: plan_speech(utterances, speaker, config.voice, duration_s,
-                             _stream(seed, stream))
+        speaker: plan_speech(utterances, speaker, config.voice, duration_s, _stream(seed, stream))
         for speaker, stream in (("A", _SPEECH_A), ("B", _SPEECH_B))
     }
     audio_rng = _stream(seed, _AUDIO)
@@ -173,22 +182,37 @@ def resample_motion(conversation: Conversation, seed: int) -> Conversation:
     seed = _check_seed(seed, "seed")
     if not isinstance(conversation, Conversation):
         raise ValueError(f"conversation must be a Conversation, got {type(conversation).__name__}")
-    motion = _draw_motion(conversation.events, conversation.style, conversation.config,
-                          conversation.num_frames, seed)
-    return replace(conversation, rotations=motion.rotations, positions=motion.positions,
-                   events=_with_motion_events(conversation.events, motion), motion_seed=seed)
+    motion = _draw_motion(
+        conversation.events, conversation.style, conversation.config, conversation.num_frames, seed
+    )
+    return replace(
+        conversation,
+        rotations=motion.rotations,
+        positions=motion.positions,
+        events=_with_motion_events(conversation.events, motion),
+        motion_seed=seed,
+    )
 
 
-def _draw_motion(events: Events, style: Style, config: ConversationConfig, n_frames: int,
-                 motion_seed: int) -> AgentMotion:
+def _draw_motion(
+    events: Events, style: Style, config: ConversationConfig, n_frames: int, motion_seed: int
+) -> AgentMotion:
     """The agent's motion given the speech events; only the motion seed's stream is used."""
-    return generate_motion(events.phrases, events.accents_of("A"), style, config.motion,
-                           n_frames, config.fps, _stream(motion_seed, _MOTION))
+    return generate_motion(
+        events.phrases,
+        events.accents_of("A"),
+        style,
+        config.motion,
+        n_frames,
+        config.fps,
+        _stream(motion_seed, _MOTION),
+    )
 
 
 def _with_motion_events(events: Events, motion: AgentMotion) -> Events:
-    return replace(events, strokes=motion.strokes, nods=motion.nods,
-                   gesture_phrases=motion.gesture_phrases)
+    return replace(
+        events, strokes=motion.strokes, nods=motion.nods, gesture_phrases=motion.gesture_phrases
+    )
 
 
 # --------------------------------------------------------------------------- files
@@ -197,13 +221,16 @@ def _with_motion_events(events: Events, motion: AgentMotion) -> Events:
 def conversation_paths(path_stem: str | os.PathLike) -> dict[str, Path]:
     """The three files of a conversation: ``{"audio": .wav, "arrays": .npz, "metadata": .json}``."""
     stem = Path(path_stem)
-    return {"audio": stem.with_name(stem.name + ".wav"),
-            "arrays": stem.with_name(stem.name + ".npz"),
-            "metadata": stem.with_name(stem.name + ".json")}
+    return {
+        "audio": stem.with_name(stem.name + ".wav"),
+        "arrays": stem.with_name(stem.name + ".npz"),
+        "metadata": stem.with_name(stem.name + ".json"),
+    }
 
 
-def save_conversation(conversation: Conversation, path_stem: str | os.PathLike,
-                      overwrite: bool = False) -> list[Path]:
+def save_conversation(
+    conversation: Conversation, path_stem: str | os.PathLike, overwrite: bool = False
+) -> list[Path]:
     """Write ``STEM.wav``, ``STEM.npz`` and ``STEM.json``; return their paths.
 
     Raises:
@@ -213,16 +240,22 @@ def save_conversation(conversation: Conversation, path_stem: str | os.PathLike,
     """
     paths = conversation_paths(path_stem)
     if not paths["audio"].parent.is_dir():
-        raise ValueError(f"cannot write {path_stem}: the folder {paths['audio'].parent} "
-                         "does not exist")
+        raise ValueError(
+            f"cannot write {path_stem}: the folder {paths['audio'].parent} does not exist"
+        )
     existing = [str(p) for p in paths.values() if p.exists()]
     if existing and not overwrite:
-        raise FileExistsError(f"{', '.join(existing)} already exist(s); pass overwrite=True "
-                              "to replace")
+        raise FileExistsError(
+            f"{', '.join(existing)} already exist(s); pass overwrite=True to replace"
+        )
     save_audio(paths["audio"], conversation.audio, conversation.sample_rate, overwrite=True)
     with open(paths["arrays"], "wb") as file:
-        np.savez_compressed(file, activity=conversation.activity,
-                            rotations=conversation.rotations, positions=conversation.positions)
+        np.savez_compressed(
+            file,
+            activity=conversation.activity,
+            rotations=conversation.rotations,
+            positions=conversation.positions,
+        )
     metadata = {
         "format": FILE_FORMAT,
         "generator_version": GENERATOR_VERSION,
@@ -255,8 +288,9 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
     paths = conversation_paths(path_stem)
     for path in paths.values():
         if not path.is_file():
-            raise FileNotFoundError(f"{path} is missing: a conversation needs the .wav, .npz "
-                                    "and .json files")
+            raise FileNotFoundError(
+                f"{path} is missing: a conversation needs the .wav, .npz and .json files"
+            )
     metadata_path = paths["metadata"]
     try:
         metadata = json.loads(metadata_path.read_text())
@@ -279,19 +313,38 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
     try:
         with np.load(paths["arrays"]) as arrays:
             activity, rotations, positions = (
-                arrays["activity"], arrays["rotations"], arrays["positions"])
+                arrays["activity"],
+                arrays["rotations"],
+                arrays["positions"],
+            )
     except (ValueError, KeyError, OSError, EOFError) as error:
         raise ValueError(f"{paths['arrays']} is damaged: {error}") from error
     n_frames = num_frames(num_samples, sample_rate, fps)
     if audio.size != num_samples:
-        raise ValueError(f"{paths['audio']} holds {audio.size} samples, but {metadata_path} "
-                         f"says {num_samples}")
-    expected = {"activity": (n_frames,), "rotations": (n_frames, NUM_JOINTS, 6),
-                "positions": (n_frames, NUM_JOINTS, 3)}
-    for name, array in (("activity", activity), ("rotations", rotations),
-                        ("positions", positions)):
+        raise ValueError(
+            f"{paths['audio']} holds {audio.size} samples, but {metadata_path} says {num_samples}"
+        )
+    expected = {
+        "activity": (n_frames,),
+        "rotations": (n_frames, NUM_JOINTS, 6),
+        "positions": (n_frames, NUM_JOINTS, 3),
+    }
+    for name, array in (("activity", activity), ("rotations", rotations), ("positions", positions)):
         if array.shape != expected[name]:
-            raise ValueError(f"{paths['arrays']}: {name} has shape {array.shape}, expected "
-                             f"{expected[name]}")
-    return Conversation(audio, sample_rate, fps, activity.astype(np.int64), rotations, positions,
-                        events, style, voices, seeds[0], seeds[1], config)
+            raise ValueError(
+                f"{paths['arrays']}: {name} has shape {array.shape}, expected {expected[name]}"
+            )
+    return Conversation(
+        audio,
+        sample_rate,
+        fps,
+        activity.astype(np.int64),
+        rotations,
+        positions,
+        events,
+        style,
+        voices,
+        seeds[0],
+        seeds[1],
+        config,
+    )

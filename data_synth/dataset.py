@@ -54,8 +54,9 @@ SEED_STRIDE = 10_000
 def split_sizes(n_conversations: int) -> dict[str, int]:
     """How many conversations go to each split (at least one each; needs 3 or more)."""
     if n_conversations < 3:
-        raise ValueError(f"a dataset needs at least 3 conversations (one per split), "
-                         f"got {n_conversations}")
+        raise ValueError(
+            f"a dataset needs at least 3 conversations (one per split), got {n_conversations}"
+        )
     held_out = max(1, round(HELD_OUT_FRACTION * n_conversations))
     return {"train": n_conversations - 2 * held_out, "val": held_out, "test": held_out}
 
@@ -67,10 +68,15 @@ def conversation_seed(dataset_seed: int, index: int) -> int:
     return (dataset_seed + 1) * SEED_STRIDE + index
 
 
-def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
-                  conversation_s: float = FULL_CONVERSATION_S,
-                  config: ConversationConfig | None = None, overwrite: bool = False,
-                  progress: bool = True) -> dict:
+def write_dataset(
+    out_dir: str | os.PathLike,
+    minutes: float,
+    seed: int,
+    conversation_s: float = FULL_CONVERSATION_S,
+    config: ConversationConfig | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> dict:
     """Generate a dataset of ``minutes`` of conversation into ``out_dir``.
 
     Args:
@@ -93,10 +99,14 @@ def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     if not (isinstance(minutes, (int, float)) and math.isfinite(minutes) and minutes > 0):
         raise ValueError(f"minutes must be a positive number, got {minutes!r}")
-    if not (isinstance(conversation_s, (int, float)) and math.isfinite(conversation_s)
-            and conversation_s >= MIN_DURATION_S):
-        raise ValueError(f"conversation_s must be at least {MIN_DURATION_S} s, "
-                         f"got {conversation_s!r}")
+    if not (
+        isinstance(conversation_s, (int, float))
+        and math.isfinite(conversation_s)
+        and conversation_s >= MIN_DURATION_S
+    ):
+        raise ValueError(
+            f"conversation_s must be at least {MIN_DURATION_S} s, got {conversation_s!r}"
+        )
     config = ConversationConfig() if config is None else config
     n_conversations = max(3, round(minutes * 60.0 / conversation_s))
     sizes = split_sizes(n_conversations)
@@ -118,32 +128,38 @@ def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
         what = "a dataset" if manifest_path.exists() else "files"
         shown = ", ".join(str(p) for p in in_the_way[:3])
         more = f" and {len(in_the_way) - 3} more" if len(in_the_way) > 3 else ""
-        raise FileExistsError(f"{out_dir} already holds {what} ({shown}{more}); "
-                              "pass overwrite=True (--overwrite) to replace it")
+        raise FileExistsError(
+            f"{out_dir} already holds {what} ({shown}{more}); "
+            "pass overwrite=True (--overwrite) to replace it"
+        )
     if overwrite and manifest_path.exists():
         _remove_old_dataset(out_dir, manifest_path, set(planned))
 
     splits: dict[str, list[dict]] = {split: [] for split in SPLITS}
     for split, index, stem in tqdm(plan, desc="conversations", disable=not progress):
         stem.parent.mkdir(parents=True, exist_ok=True)
-        conversation = generate_conversation(conversation_s, conversation_seed(seed, index),
-                                             config)
+        conversation = generate_conversation(conversation_s, conversation_seed(seed, index), config)
         save_conversation(conversation, stem, overwrite=overwrite)
-        splits[split].append({
-            "name": stem.name,
-            "conversation_seed": conversation.conversation_seed,
-            "motion_seed": conversation.motion_seed,
-            "duration_s": conversation.duration_s,
-            "num_frames": conversation.num_frames,
-            "files": {kind: path.relative_to(out_dir).as_posix()
-                      for kind, path in conversation_paths(stem).items()},
-        })
+        splits[split].append(
+            {
+                "name": stem.name,
+                "conversation_seed": conversation.conversation_seed,
+                "motion_seed": conversation.motion_seed,
+                "duration_s": conversation.duration_s,
+                "num_frames": conversation.num_frames,
+                "files": {
+                    kind: path.relative_to(out_dir).as_posix()
+                    for kind, path in conversation_paths(stem).items()
+                },
+            }
+        )
     manifest = {
         **_provenance(minutes, seed, conversation_s, config),
         "fps": config.fps,
         "sample_rate": config.sample_rate,
-        "durations_s": {split: sum(e["duration_s"] for e in entries)
-                        for split, entries in splits.items()},
+        "durations_s": {
+            split: sum(e["duration_s"] for e in entries) for split, entries in splits.items()
+        },
         "splits": splits,
     }
     text = json.dumps(manifest, indent=1)
@@ -151,8 +167,9 @@ def write_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
     return json.loads(text)  # exactly what read_manifest will give (tuples read back as lists)
 
 
-def _provenance(minutes: float, seed: int, conversation_s: float,
-                config: ConversationConfig) -> dict:
+def _provenance(
+    minutes: float, seed: int, conversation_s: float, config: ConversationConfig
+) -> dict:
     """The manifest entries that decide a dataset's content: same entries, same files."""
     return {
         "format": DATASET_FORMAT,
@@ -165,9 +182,14 @@ def _provenance(minutes: float, seed: int, conversation_s: float,
     }
 
 
-def ensure_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
-                   conversation_s: float = FULL_CONVERSATION_S,
-                   config: ConversationConfig | None = None, progress: bool = True) -> dict:
+def ensure_dataset(
+    out_dir: str | os.PathLike,
+    minutes: float,
+    seed: int,
+    conversation_s: float = FULL_CONVERSATION_S,
+    config: ConversationConfig | None = None,
+    progress: bool = True,
+) -> dict:
     """The dataset these arguments describe, in ``out_dir``: reused if it is there, else written.
 
     This is what notebooks call, so that a dataset is generated once and shared by all of them,
@@ -194,18 +216,27 @@ def ensure_dataset(out_dir: str | os.PathLike, minutes: float, seed: int,
         try:
             manifest = read_manifest(out_dir)
         except ValueError as error:
-            raise FileExistsError(f"{error}; delete the folder or regenerate it with "
-                                  f"`python -m data_synth --out {out_dir} --overwrite`") from error
+            raise FileExistsError(
+                f"{error}; delete the folder or regenerate it with "
+                f"`python -m data_synth --out {out_dir} --overwrite`"
+            ) from error
         differences = [key for key, value in wanted.items() if manifest.get(key) != value]
         if not differences:
             return manifest
-        print(f"Regenerating the dataset in {out_dir}: it was made with different "
-              + ", ".join(f"{key} ({manifest.get(key)!r}, now {value!r})" if key != "config"
-                          else "generator settings" for key, value in wanted.items()
-                          if key in differences))
+        print(
+            f"Regenerating the dataset in {out_dir}: it was made with different "
+            + ", ".join(
+                f"{key} ({manifest.get(key)!r}, now {value!r})"
+                if key != "config"
+                else "generator settings"
+                for key, value in wanted.items()
+                if key in differences
+            )
+        )
         stale = True
-    return write_dataset(out_dir, minutes, seed, conversation_s, config, overwrite=stale,
-                         progress=progress)
+    return write_dataset(
+        out_dir, minutes, seed, conversation_s, config, overwrite=stale, progress=progress
+    )
 
 
 def _remove_old_dataset(out_dir: Path, manifest_path: Path, keep: set[Path]) -> None:
@@ -239,7 +270,8 @@ def read_manifest(dataset_dir: str | os.PathLike) -> dict:
         raise FileNotFoundError(
             f"{path} is missing: {dataset_dir} is not a complete data_synth dataset (writing "
             "may have been interrupted); regenerate it with "
-            f"`python -m data_synth --out {dataset_dir} --overwrite`")
+            f"`python -m data_synth --out {dataset_dir} --overwrite`"
+        )
     try:
         manifest = json.loads(path.read_text())
         if manifest.get("format") != DATASET_FORMAT:
@@ -247,8 +279,10 @@ def read_manifest(dataset_dir: str | os.PathLike) -> dict:
         for split in SPLITS:
             for entry in manifest["splits"][split]:
                 if set(entry["files"]) != {"audio", "arrays", "metadata"}:
-                    raise ValueError(f"entry {entry.get('name')!r} of split {split!r} must list "
-                                     "its audio, arrays and metadata files")
+                    raise ValueError(
+                        f"entry {entry.get('name')!r} of split {split!r} must list "
+                        "its audio, arrays and metadata files"
+                    )
     except (ValueError, KeyError, TypeError, AttributeError) as error:
         raise ValueError(f"{path} is damaged: {error}") from error
     return manifest
@@ -271,14 +305,19 @@ def load_split(dataset_dir: str | os.PathLike, split: str) -> list[Conversation]
         stem = audio_path.with_name(audio_path.name[: -len(".wav")])
         for kind, path in conversation_paths(stem).items():
             if Path(entry["files"][kind]) != path.relative_to(dataset_dir):
-                raise ValueError(f"{dataset_dir / MANIFEST_NAME}: the files of {entry['name']} "
-                                 "must share one name stem")
+                raise ValueError(
+                    f"{dataset_dir / MANIFEST_NAME}: the files of {entry['name']} "
+                    "must share one name stem"
+                )
         conversation = load_conversation(stem)
-        if (conversation.conversation_seed != entry["conversation_seed"]
-                or conversation.num_frames != entry["num_frames"]):
+        if (
+            conversation.conversation_seed != entry["conversation_seed"]
+            or conversation.num_frames != entry["num_frames"]
+        ):
             raise ValueError(
                 f"{stem}.json does not match {dataset_dir / MANIFEST_NAME} (seed or length "
-                "differs): the folder mixes files of different datasets; regenerate it")
+                "differs): the folder mixes files of different datasets; regenerate it"
+            )
         conversations.append(conversation)
     return conversations
 

@@ -57,14 +57,16 @@ def emphasis_envelope(audio: np.ndarray, sample_rate: int, fps: int = FPS) -> np
     return rise / peak if peak > 0 else rise
 
 
-def agent_emphasis(audio: np.ndarray, sample_rate: int, activity: np.ndarray,
-                   fps: int = FPS) -> np.ndarray:
+def agent_emphasis(
+    audio: np.ndarray, sample_rate: int, activity: np.ndarray, fps: int = FPS
+) -> np.ndarray:
     """:func:`emphasis_envelope` ``(T - 1,)`` kept only where the agent speaks (A or both)."""
     activity = np.asarray(activity)
     envelope = emphasis_envelope(audio, sample_rate, fps)
     if activity.shape != (envelope.size + 1,):
-        raise ValueError(f"activity must have shape (T,) = ({envelope.size + 1},), "
-                         f"got {activity.shape}")
+        raise ValueError(
+            f"activity must have shape (T,) = ({envelope.size + 1},), got {activity.shape}"
+        )
     agent = np.isin(activity, (Activity.A_SPEAKS, Activity.BOTH))
     return envelope * (agent[:-1] & agent[1:])
 
@@ -74,8 +76,14 @@ def wrist_speed(positions: np.ndarray, fps: int = FPS) -> np.ndarray:
     return speed(positions, fps)[:, list(JOINT_GROUPS["wrists"])].sum(axis=1)
 
 
-def measure_stroke_lead(audio: np.ndarray, sample_rate: int, activity: np.ndarray,
-                        positions: np.ndarray, fps: int = FPS, max_lag_s: float = 0.6) -> float:
+def measure_stroke_lead(
+    audio: np.ndarray,
+    sample_rate: int,
+    activity: np.ndarray,
+    positions: np.ndarray,
+    fps: int = FPS,
+    max_lag_s: float = 0.6,
+) -> float:
     """Seconds by which the agent's wrist speed leads the emphasis of its speech.
 
     Args:
@@ -89,5 +97,9 @@ def measure_stroke_lead(audio: np.ndarray, sample_rate: int, activity: np.ndarra
         The lead in seconds (positive: the wrists move before the stressed syllables), by
         :func:`gesturelib.metrics.lead_lag` of :func:`wrist_speed` against :func:`agent_emphasis`.
     """
-    return lead_lag(agent_emphasis(audio, sample_rate, activity, fps),
-                    wrist_speed(positions, fps), fps, max_lag_s)
+    return lead_lag(
+        agent_emphasis(audio, sample_rate, activity, fps),
+        wrist_speed(positions, fps),
+        fps,
+        max_lag_s,
+    )

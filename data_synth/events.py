@@ -121,8 +121,9 @@ class Events:
 
     def phrases_of(self, speaker: str, kind: str | None = "phrase") -> list[Phrase]:
         """The phrases of one speaker, of one kind (``None`` for both kinds)."""
-        return [p for p in self.phrases
-                if p.speaker == speaker and (kind is None or p.kind == kind)]
+        return [
+            p for p in self.phrases if p.speaker == speaker and (kind is None or p.kind == kind)
+        ]
 
     def accents_of(self, speaker: str) -> list[Accent]:
         """The accents (stressed syllables) of one speaker."""

@@ -141,15 +141,21 @@ def rest_wrist(hand: str) -> np.ndarray:
 
 def gesture_centre(style: Style) -> np.ndarray:
     """The centre ``(3,)`` of the left hand's gesture space in the body frame, cm."""
-    return np.array([GESTURE_X_CM + GESTURE_X_PER_RADIUS * style.gesture_radius_cm,
-                     REST_WRIST[1] + style.hand_height_cm, GESTURE_Z_CM])
+    return np.array(
+        [
+            GESTURE_X_CM + GESTURE_X_PER_RADIUS * style.gesture_radius_cm,
+            REST_WRIST[1] + style.hand_height_cm,
+            GESTURE_Z_CM,
+        ]
+    )
 
 
 def home_wrist(hand: str, style: Style) -> np.ndarray:
     """The home position ``(3,)`` of one wrist in the body frame, cm (see the module rules)."""
     centre = gesture_centre(style)
-    home = np.array([HOME_X_CM, REST_WRIST[1] + HOME_SHARE * (centre[1] - REST_WRIST[1]),
-                     HOME_Z_CM])
+    home = np.array(
+        [HOME_X_CM, REST_WRIST[1] + HOME_SHARE * (centre[1] - REST_WRIST[1]), HOME_Z_CM]
+    )
     return home * np.array([SIDE[hand], 1.0, 1.0])
 
 
@@ -232,8 +238,13 @@ class _PhrasePlan:
         return "both" if len(self.hands) == 2 else self.hands[0]
 
 
-def plan_gestures(utterances: list[Phrase], accents: list[Accent], style: Style,
-                  config: MotionConfig, rng: np.random.Generator) -> GesturePlan:
+def plan_gestures(
+    utterances: list[Phrase],
+    accents: list[Accent],
+    style: Style,
+    config: MotionConfig,
+    rng: np.random.Generator,
+) -> GesturePlan:
     """Plan the wrist keyframes of every gesture phrase of the agent (see the module rules).
 
     Args:
@@ -267,14 +278,22 @@ def plan_gestures(utterances: list[Phrase], accents: list[Accent], style: Style,
                 tracks[hand].go(tracks[hand].home, phrase.end, timing.retraction)
         for track in tracks.values():
             _settle(track, phrase.end, next_ready, timing)
-        gesture_phrases.append(GesturePhrase(float(min(starts)), float(max(ends)), plan.label,
-                                             phrase.start, phrase.end))
+        gesture_phrases.append(
+            GesturePhrase(
+                float(min(starts)), float(max(ends)), plan.label, phrase.start, phrase.end
+            )
+        )
         for beat_index in sorted(performed):
             peak_time, hands = performed[beat_index]
             beat = plan.beats[beat_index]
-            strokes.append(Stroke(float(peak_time), float(beat.accent.time),
-                                  "both" if len(hands) == 2 else hands[0],
-                                  float(beat.amplitude_cm)))
+            strokes.append(
+                Stroke(
+                    float(peak_time),
+                    float(beat.accent.time),
+                    "both" if len(hands) == 2 else hands[0],
+                    float(beat.amplitude_cm),
+                )
+            )
 
     return GesturePlan(
         key_times={hand: np.array(tracks[hand].times) for hand in HANDS},
@@ -284,12 +303,18 @@ def plan_gestures(utterances: list[Phrase], accents: list[Accent], style: Style,
     )
 
 
-def _plan_phrases(utterances: list[Phrase], accents: list[Accent], style: Style,
-                  config: MotionConfig, timing: _Timing,
-                  rng: np.random.Generator) -> list[_PhrasePlan]:
+def _plan_phrases(
+    utterances: list[Phrase],
+    accents: list[Accent],
+    style: Style,
+    config: MotionConfig,
+    timing: _Timing,
+    rng: np.random.Generator,
+) -> list[_PhrasePlan]:
     """Hands, centre and beats of each of the agent's phrases, in time order."""
-    phrases = sorted((u for u in utterances if u.speaker == "A" and u.kind == "phrase"),
-                     key=lambda u: u.start)
+    phrases = sorted(
+        (u for u in utterances if u.speaker == "A" and u.kind == "phrase"), key=lambda u: u.start
+    )
     partner = [u for u in utterances if u.speaker == "B" and u.kind == "phrase"]
     accent_times = np.array([a.time for a in accents])
     centre = gesture_centre(style) * MIRROR  # right-hand coordinates
@@ -305,13 +330,21 @@ def _plan_phrases(utterances: list[Phrase], accents: list[Accent], style: Style,
         else:
             hands = ("right",) if rng.random() < style.handedness else ("left",)
         phrase_centre = _clear_of_midline(
-            centre + style.gesture_radius_cm * PHRASE_SPREAD * rng.uniform(-1.0, 1.0, 3))
+            centre + style.gesture_radius_cm * PHRASE_SPREAD * rng.uniform(-1.0, 1.0, 3)
+        )
         inside = np.flatnonzero((accent_times >= phrase.start) & (accent_times < phrase.end))
         beats = _draw_beats([accents[i] for i in inside], phrase_centre, style, config, rng)
         first_top = beats[0].time - timing.stroke / 2 if beats else phrase.start
-        plans.append(_PhrasePlan(phrase, hands, phrase_centre, beats,
-                                 min(phrase.start, first_top) - READY_MARGIN_S,
-                                 partner_speaks_after))
+        plans.append(
+            _PhrasePlan(
+                phrase,
+                hands,
+                phrase_centre,
+                beats,
+                min(phrase.start, first_top) - READY_MARGIN_S,
+                partner_speaks_after,
+            )
+        )
     return plans
 
 
@@ -345,8 +378,9 @@ def _stroke_form(style: Style, rng: np.random.Generator) -> str:
     """One phrase's stroke form: ``"outward"``, ``"press"`` or ``"down"`` (module rules)."""
     outward = min(OUTWARD_PER_RADIUS * style.gesture_radius_cm, 1.0 - PRESS_PROBABILITY)
     draw = rng.random()
-    return "outward" if draw < outward else "press" if draw < outward + PRESS_PROBABILITY \
-        else "down"
+    return (
+        "outward" if draw < outward else "press" if draw < outward + PRESS_PROBABILITY else "down"
+    )
 
 
 def _stroke_direction(form: str, rng: np.random.Generator) -> np.ndarray:
@@ -360,8 +394,13 @@ def _stroke_direction(form: str, rng: np.random.Generator) -> np.ndarray:
     return direction / np.linalg.norm(direction)
 
 
-def _draw_beats(accents: list[Accent], centre: np.ndarray, style: Style, config: MotionConfig,
-                rng: np.random.Generator) -> list[_Beat]:
+def _draw_beats(
+    accents: list[Accent],
+    centre: np.ndarray,
+    style: Style,
+    config: MotionConfig,
+    rng: np.random.Generator,
+) -> list[_Beat]:
     """One beat per accent, in right-hand coordinates: timing, start, direction, amplitude.
 
     ``centre`` is the phrase's centre ``(3,)``. A stroke is centred on its beat's centre, then
@@ -384,8 +423,9 @@ def _draw_beats(accents: list[Accent], centre: np.ndarray, style: Style, config:
     return beats
 
 
-def _gesture_phrase(track: _HandTrack, plan: _PhrasePlan, hand: str, next_ready: float,
-                    timing: _Timing) -> tuple[float, list[tuple[int, float]]]:
+def _gesture_phrase(
+    track: _HandTrack, plan: _PhrasePlan, hand: str, next_ready: float, timing: _Timing
+) -> tuple[float, list[tuple[int, float]]]:
     """Append one hand's preparation, beats and retraction (or hold) to its track.
 
     ``next_ready`` is when the hands must be up for the agent's next phrase.
@@ -429,6 +469,8 @@ def _settle(track: _HandTrack, idle_from: float, next_ready: float, timing: _Tim
     """Let a hand that waits at home, not needed since ``idle_from``, sink to rest if it will not
     be needed until ``next_ready`` either."""
     settle_start = max(track.last_time, idle_from) + HOME_DWELL_S
-    if track.is_at(track.home) and \
-            settle_start + SETTLE_S + MIN_REST_S + timing.preparation <= next_ready:
+    if (
+        track.is_at(track.home)
+        and settle_start + SETTLE_S + MIN_REST_S + timing.preparation <= next_ready
+    ):
         track.go(track.rest, settle_start, SETTLE_S)

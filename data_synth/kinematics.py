@@ -19,8 +19,9 @@ from scipy.ndimage import gaussian_filter1d
 REACH_MARGIN = 0.98
 
 
-def minimum_jerk_path(key_times: np.ndarray, key_values: np.ndarray,
-                      times: np.ndarray) -> np.ndarray:
+def minimum_jerk_path(
+    key_times: np.ndarray, key_values: np.ndarray, times: np.ndarray
+) -> np.ndarray:
     """Evaluate a chain of minimum-jerk movements through keyframes.
 
     Args:
@@ -49,8 +50,9 @@ def minimum_jerk_path(key_times: np.ndarray, key_values: np.ndarray,
     return key_values[segment] + blend * (key_values[segment + 1] - key_values[segment])
 
 
-def two_bone_ik(root: np.ndarray, target: np.ndarray, pole: np.ndarray, upper_length: float,
-                lower_length: float) -> tuple[np.ndarray, np.ndarray]:
+def two_bone_ik(
+    root: np.ndarray, target: np.ndarray, pole: np.ndarray, upper_length: float, lower_length: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Place the middle joint of a two-bone chain (shoulder-elbow-wrist) analytically.
 
     The end joint reaches ``target`` (pulled in to ``REACH_MARGIN`` of full reach, or pushed out
@@ -111,4 +113,4 @@ def smooth_noise(rng: np.random.Generator, n: int, sigma: float, dims: int = 1) 
     """
     margin = int(4 * sigma)
     noise = gaussian_filter1d(rng.standard_normal((n + 2 * margin, dims)), sigma, axis=0)
-    return noise[margin: margin + n] * np.sqrt(2.0 * np.sqrt(np.pi) * sigma)
+    return noise[margin : margin + n] * np.sqrt(2.0 * np.sqrt(np.pi) * sigma)

@@ -104,9 +104,15 @@ class AgentMotion:
     gesture_phrases: list[GesturePhrase]
 
 
-def generate_motion(utterances: list[Phrase], accents: list[Accent], style: Style,
-                    config: MotionConfig, n_frames: int, fps: int,
-                    rng: np.random.Generator) -> AgentMotion:
+def generate_motion(
+    utterances: list[Phrase],
+    accents: list[Accent],
+    style: Style,
+    config: MotionConfig,
+    n_frames: int,
+    fps: int,
+    rng: np.random.Generator,
+) -> AgentMotion:
     """Generate the agent's motion for a conversation.
 
     Args:
@@ -132,8 +138,9 @@ def generate_motion(utterances: list[Phrase], accents: list[Accent], style: Styl
     sway = smooth_noise(rng, n_frames, SWAY_TIME_S * fps, 3) * np.radians(config.sway_deg)
     sway *= activity[:, None] * np.array([1.0, 1.0, 0.6])
     lean = np.radians(SPEAKING_LEAN_DEG) * gesturing
-    torso = euler_matrix(np.radians(BREATH_CHEST_DEG) * breath + sway[:, 0] + lean,
-                         sway[:, 1], sway[:, 2])
+    torso = euler_matrix(
+        np.radians(BREATH_CHEST_DEG) * breath + sway[:, 0] + lean, sway[:, 1], sway[:, 2]
+    )
 
     body = np.zeros((n_frames, NUM_JOINTS, 3))
     sternum = T_POSE_OFFSETS[JOINT_INDEX["sternum"]]
@@ -145,14 +152,19 @@ def generate_motion(utterances: list[Phrase], accents: list[Accent], style: Styl
     for h, hand in enumerate(HANDS):
         side = SIDE[hand]
         shoulder = sternum + width * np.stack(
-            [side * np.cos(shrug), np.sin(shrug), np.zeros(n_frames)], -1)
+            [side * np.cos(shrug), np.sin(shrug), np.zeros(n_frames)], -1
+        )
         target = minimum_jerk_path(plan.key_times[hand], plan.key_points[hand], times)
         # A hand held up drifts; one lying in the lap barely moves.
         raised = np.clip((target[:, 1] - REST_WRIST[1]) / HAND_SUPPORT_CM, LAP_DRIFT, 1.0)
         target += hand_noise[:, h] * raised[:, None]
         elbow, wrist = two_bone_ik(
-            shoulder, target, elbow_pole(shoulder, target, side, fps),
-            BONE_LENGTHS[JOINT_INDEX[f"{hand}_elbow"]], BONE_LENGTHS[JOINT_INDEX[f"{hand}_wrist"]])
+            shoulder,
+            target,
+            elbow_pole(shoulder, target, side, fps),
+            BONE_LENGTHS[JOINT_INDEX[f"{hand}_elbow"]],
+            BONE_LENGTHS[JOINT_INDEX[f"{hand}_wrist"]],
+        )
         body[:, JOINT_INDEX[f"{hand}_shoulder"]] = shoulder
         body[:, JOINT_INDEX[f"{hand}_elbow"]] = elbow
         body[:, JOINT_INDEX[f"{hand}_wrist"]] = wrist
@@ -164,8 +176,9 @@ def generate_motion(utterances: list[Phrase], accents: list[Accent], style: Styl
     neck = euler_matrix(*(NECK_SHARE * head_angles.T))
     head_turn = euler_matrix(*head_angles.T)
     body[:, JOINT_INDEX["head"]] = sternum + neck @ T_POSE_OFFSETS[JOINT_INDEX["head"]]
-    body[:, JOINT_INDEX["nose"]] = body[:, JOINT_INDEX["head"]] \
-        + head_turn @ T_POSE_OFFSETS[JOINT_INDEX["nose"]]
+    body[:, JOINT_INDEX["nose"]] = (
+        body[:, JOINT_INDEX["head"]] + head_turn @ T_POSE_OFFSETS[JOINT_INDEX["nose"]]
+    )
 
     world = np.einsum("tij,tkj->tki", torso, body)
     rotations = rotations_from_positions(world).astype(np.float32)

@@ -32,8 +32,13 @@ REPETITION_PROBABILITIES = (0.5, 0.3, 0.2)
 REPETITION_DECAY = 0.6
 
 
-def plan_nods(utterances: list[Phrase], accents: list[Accent], style: Style,
-              config: MotionConfig, rng: np.random.Generator) -> list[Nod]:
+def plan_nods(
+    utterances: list[Phrase],
+    accents: list[Accent],
+    style: Style,
+    config: MotionConfig,
+    rng: np.random.Generator,
+) -> list[Nod]:
     """Draw the agent's nods (see the module rules), sorted by time.
 
     Args:
@@ -44,24 +49,42 @@ def plan_nods(utterances: list[Phrase], accents: list[Accent], style: Style,
     candidates: list[Nod] = []
     for accent in accents:
         if rng.random() < config.accent_nod_probability * accent.emphasis:
-            candidates.append(Nod(float(accent.time - config.stroke_lead_s),
-                                  float(config.accent_nod_deg * accent.emphasis), 1, "accent"))
+            candidates.append(
+                Nod(
+                    float(accent.time - config.stroke_lead_s),
+                    float(config.accent_nod_deg * accent.emphasis),
+                    1,
+                    "accent",
+                )
+            )
     agent = [u for u in utterances if u.speaker == "A"]
     for phrase in utterances:
         if phrase.speaker != "B" or phrase.kind != "phrase":
             continue
-        agent_talks = any(u.start < phrase.end + LISTENING_WINDOW_S and u.end > phrase.end
-                          for u in agent)
+        agent_talks = any(
+            u.start < phrase.end + LISTENING_WINDOW_S and u.end > phrase.end for u in agent
+        )
         if not agent_talks and rng.random() < config.listening_nod_probability:
             repetitions = 1 + int(rng.choice(3, p=REPETITION_PROBABILITIES))
             time = phrase.end + rng.uniform(*config.nod_delay_s) + cycle / 4
-            candidates.append(Nod(float(time), float(rng.uniform(*config.listening_nod_deg)),
-                                  repetitions, "partner_phrase_end"))
+            candidates.append(
+                Nod(
+                    float(time),
+                    float(rng.uniform(*config.listening_nod_deg)),
+                    repetitions,
+                    "partner_phrase_end",
+                )
+            )
     for backchannel in agent:
         if backchannel.kind == "backchannel":
-            candidates.append(Nod(float(backchannel.start + cycle / 4),
-                                  float(rng.uniform(*config.listening_nod_deg)),
-                                  1 + int(rng.integers(2)), "own_backchannel"))
+            candidates.append(
+                Nod(
+                    float(backchannel.start + cycle / 4),
+                    float(rng.uniform(*config.listening_nod_deg)),
+                    1 + int(rng.integers(2)),
+                    "own_backchannel",
+                )
+            )
 
     nods: list[Nod] = []
     free_from = -np.inf

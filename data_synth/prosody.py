@@ -46,14 +46,37 @@ SEGMENT_KINDS = VOWELS + VOICED_CONSONANTS + FRICATIVES + PLOSIVES
 KIND_INDEX = {kind: i for i, kind in enumerate(SEGMENT_KINDS)}
 
 #: Onset consonants and their probabilities ("" is no consonant).
-ONSETS = {"": 0.15, "s": 0.12, "sh": 0.05, "f": 0.07, "h": 0.06, "p": 0.08, "t": 0.12,
-          "k": 0.10, "m": 0.08, "n": 0.08, "l": 0.05, "r": 0.04}
+ONSETS = {
+    "": 0.15,
+    "s": 0.12,
+    "sh": 0.05,
+    "f": 0.07,
+    "h": 0.06,
+    "p": 0.08,
+    "t": 0.12,
+    "k": 0.10,
+    "m": 0.08,
+    "n": 0.08,
+    "l": 0.05,
+    "r": 0.04,
+}
 #: Coda consonants and their probabilities.
 CODAS = {"": 0.6, "n": 0.12, "s": 0.1, "t": 0.1, "m": 0.08}
 #: Amplitude of each consonant relative to an unstressed vowel (after each filter is normalised
 #: to unit output power): consonants are much weaker than vowels.
-CONSONANT_LEVEL = {"l": 0.5, "r": 0.5, "m": 0.35, "n": 0.35, "s": 0.22, "sh": 0.25, "f": 0.1,
-                   "h": 0.1, "p": 0.4, "t": 0.45, "k": 0.45}
+CONSONANT_LEVEL = {
+    "l": 0.5,
+    "r": 0.5,
+    "m": 0.35,
+    "n": 0.35,
+    "s": 0.22,
+    "sh": 0.25,
+    "f": 0.1,
+    "h": 0.1,
+    "p": 0.4,
+    "t": 0.45,
+    "k": 0.45,
+}
 #: A vowel reaches full loudness in this time; the accent time is the middle of this attack.
 VOWEL_ATTACK_S = 0.015
 VOWEL_RELEASE_S = 0.03
@@ -106,8 +129,9 @@ class _SegmentList:
     def __init__(self):
         self.rows: list[tuple] = []
 
-    def add(self, kind: str, start: float, duration: float, level: float,
-            attack: float, release: float) -> None:
+    def add(
+        self, kind: str, start: float, duration: float, level: float, attack: float, release: float
+    ) -> None:
         if duration > 0 and level > 0:
             self.rows.append((KIND_INDEX[kind], start, duration, level, attack, release))
 
@@ -116,8 +140,13 @@ class _SegmentList:
         return Segments(table[:, 0].astype(np.int64), *table[:, 1:].T)
 
 
-def plan_speech(utterances: list[Phrase], speaker: str, config: VoiceConfig, duration_s: float,
-                rng: np.random.Generator) -> SpeechPlan:
+def plan_speech(
+    utterances: list[Phrase],
+    speaker: str,
+    config: VoiceConfig,
+    duration_s: float,
+    rng: np.random.Generator,
+) -> SpeechPlan:
     """Plan the syllables, accents, sound segments and pitch of one speaker's utterances."""
     own = sorted((u for u in utterances if u.speaker == speaker), key=lambda u: u.start)
     segments = _SegmentList()
@@ -126,8 +155,11 @@ def plan_speech(utterances: list[Phrase], speaker: str, config: VoiceConfig, dur
     for utterance in own:
         if utterance.kind == "phrase":
             new = _plan_phrase(utterance, config, rng, segments)
-            final = QUESTION_RISE_SEMITONES if rng.random() < config.question_probability \
+            final = (
+                QUESTION_RISE_SEMITONES
+                if rng.random() < config.question_probability
                 else FINAL_FALL_SEMITONES
+            )
         else:
             new = _plan_backchannel(utterance, config, rng, segments)
             final = 1.5
@@ -135,7 +167,8 @@ def plan_speech(utterances: list[Phrase], speaker: str, config: VoiceConfig, dur
         syllables.extend(new)
     accents = [
         Accent(speaker, s.vowel_onset + VOWEL_ATTACK_S / 2, s.emphasis)
-        for s in syllables if s.emphasis > 0
+        for s in syllables
+        if s.emphasis > 0
     ]
     pitch = _pitch_contour(own, syllables, pitch_moves, config, duration_s, rng)
     return SpeechPlan(speaker, syllables, accents, segments.to_segments(), pitch)
@@ -146,8 +179,9 @@ def _choose(rng: np.random.Generator, table: dict[str, float]) -> str:
     return keys[rng.choice(len(keys), p=np.array(list(table.values())) / sum(table.values()))]
 
 
-def _plan_phrase(phrase: Phrase, config: VoiceConfig, rng: np.random.Generator,
-                 segments: _SegmentList) -> list[Syllable]:
+def _plan_phrase(
+    phrase: Phrase, config: VoiceConfig, rng: np.random.Generator, segments: _SegmentList
+) -> list[Syllable]:
     duration = phrase.end - phrase.start
     n = max(2, round(duration * rng.uniform(*config.syllable_rate_hz)))
     emphasis = np.zeros(n)
@@ -155,8 +189,9 @@ def _plan_phrase(phrase: Phrase, config: VoiceConfig, rng: np.random.Generator,
     index = int(rng.integers(0, min(3, n)))
     while index < n:
         accented.append(index)
-        index += int(rng.integers(config.accent_spacing_syllables[0],
-                                  config.accent_spacing_syllables[1] + 1))
+        index += int(
+            rng.integers(config.accent_spacing_syllables[0], config.accent_spacing_syllables[1] + 1)
+        )
     low, high = config.emphasis_range
     emphasis[accented] = rng.uniform(low, high, len(accented))
     emphasis[accented[-1]] = rng.uniform((low + high) / 2, high)  # the nuclear accent
@@ -166,19 +201,31 @@ def _plan_phrase(phrase: Phrase, config: VoiceConfig, rng: np.random.Generator,
     weights[-1] *= config.final_lengthening
     bounds = phrase.start + duration * np.concatenate([[0.0], np.cumsum(weights) / weights.sum()])
     position = (bounds[:-1] - phrase.start) / duration  # 0 at the phrase start, ~1 at its end
-    gain_db = (config.accent_gain_db * emphasis - INTENSITY_DECLINATION_DB * position
-               + rng.normal(0.0, 0.7, n) * (emphasis == 0))
+    gain_db = (
+        config.accent_gain_db * emphasis
+        - INTENSITY_DECLINATION_DB * position
+        + rng.normal(0.0, 0.7, n) * (emphasis == 0)
+    )
     levels = 10.0 ** (gain_db / 20.0)
     return [
-        _plan_syllable(phrase.speaker, bounds[i], bounds[i + 1], _choose(rng, ONSETS),
-                       VOWELS[rng.integers(len(VOWELS))], _choose(rng, CODAS), levels[i],
-                       float(emphasis[i]), segments)
+        _plan_syllable(
+            phrase.speaker,
+            bounds[i],
+            bounds[i + 1],
+            _choose(rng, ONSETS),
+            VOWELS[rng.integers(len(VOWELS))],
+            _choose(rng, CODAS),
+            levels[i],
+            float(emphasis[i]),
+            segments,
+        )
         for i in range(n)
     ]
 
 
-def _plan_backchannel(phrase: Phrase, config: VoiceConfig, rng: np.random.Generator,
-                      segments: _SegmentList) -> list[Syllable]:
+def _plan_backchannel(
+    phrase: Phrase, config: VoiceConfig, rng: np.random.Generator, segments: _SegmentList
+) -> list[Syllable]:
     level = 10.0 ** (config.backchannel_level_db / 20.0)
     if rng.random() < 0.5:  # "mm-hm": two nasal syllables
         parts = [("", "m", ""), ("h", "m", "")]
@@ -186,15 +233,32 @@ def _plan_backchannel(phrase: Phrase, config: VoiceConfig, rng: np.random.Genera
         parts = [("", "e", "")] if rng.random() < 0.5 else [("", "o", ""), ("k", "e", "")]
     bounds = np.linspace(phrase.start, phrase.end, len(parts) + 1)
     return [
-        _plan_syllable(phrase.speaker, bounds[i], bounds[i + 1], *parts[i], level, 0.0, segments,
-                       consonant_gain=level)
+        _plan_syllable(
+            phrase.speaker,
+            bounds[i],
+            bounds[i + 1],
+            *parts[i],
+            level,
+            0.0,
+            segments,
+            consonant_gain=level,
+        )
         for i in range(len(parts))
     ]
 
 
-def _plan_syllable(speaker: str, start: float, end: float, onset: str, vowel: str, coda: str,
-                   level: float, emphasis: float, segments: _SegmentList,
-                   consonant_gain: float = 1.0) -> Syllable:
+def _plan_syllable(
+    speaker: str,
+    start: float,
+    end: float,
+    onset: str,
+    vowel: str,
+    coda: str,
+    level: float,
+    emphasis: float,
+    segments: _SegmentList,
+    consonant_gain: float = 1.0,
+) -> Syllable:
     """Lay out one syllable's segments between ``start`` and ``end``; return its event.
 
     ``level`` is the vowel's amplitude (stress included); consonants get their
@@ -215,26 +279,47 @@ def _plan_syllable(speaker: str, start: float, end: float, onset: str, vowel: st
 
     if onset in PLOSIVES:  # closure (silence), burst, aspiration
         burst = vowel_onset - ASPIRATION_S * squeeze - BURST_S * squeeze
-        segments.add(onset, burst, BURST_S * squeeze, consonant_gain * CONSONANT_LEVEL[onset],
-                     0.001, 0.008)
-        segments.add("h", burst + BURST_S * squeeze, ASPIRATION_S * squeeze + 0.01,
-                     consonant_gain * CONSONANT_LEVEL["h"], 0.003, 0.01)
+        segments.add(
+            onset, burst, BURST_S * squeeze, consonant_gain * CONSONANT_LEVEL[onset], 0.001, 0.008
+        )
+        segments.add(
+            "h",
+            burst + BURST_S * squeeze,
+            ASPIRATION_S * squeeze + 0.01,
+            consonant_gain * CONSONANT_LEVEL["h"],
+            0.003,
+            0.01,
+        )
     elif onset:  # overlaps the vowel's attack a little: coarticulation
-        segments.add(onset, start, onset_s + 0.01, consonant_gain * CONSONANT_LEVEL[onset],
-                     0.015, 0.015)
+        segments.add(
+            onset, start, onset_s + 0.01, consonant_gain * CONSONANT_LEVEL[onset], 0.015, 0.015
+        )
     vowel_level = level * (CONSONANT_LEVEL["m"] * 2 if vowel == "m" else 1.0)
-    segments.add(vowel, vowel_onset, vowel_end - vowel_onset, vowel_level, VOWEL_ATTACK_S,
-                 VOWEL_RELEASE_S)
+    segments.add(
+        vowel, vowel_onset, vowel_end - vowel_onset, vowel_level, VOWEL_ATTACK_S, VOWEL_RELEASE_S
+    )
     if coda:
-        segments.add(coda, vowel_end - 0.01, coda_s + 0.01, consonant_gain * CONSONANT_LEVEL[coda],
-                     0.015, 0.02)
-    return Syllable(speaker, float(start), float(end), float(vowel_onset), onset, vowel, coda,
-                    emphasis)
+        segments.add(
+            coda,
+            vowel_end - 0.01,
+            coda_s + 0.01,
+            consonant_gain * CONSONANT_LEVEL[coda],
+            0.015,
+            0.02,
+        )
+    return Syllable(
+        speaker, float(start), float(end), float(vowel_onset), onset, vowel, coda, emphasis
+    )
 
 
-def _pitch_contour(utterances: list[Phrase], syllables: list[Syllable],
-                   pitch_moves: list[tuple[float, float, float]], config: VoiceConfig,
-                   duration_s: float, rng: np.random.Generator) -> np.ndarray:
+def _pitch_contour(
+    utterances: list[Phrase],
+    syllables: list[Syllable],
+    pitch_moves: list[tuple[float, float, float]],
+    config: VoiceConfig,
+    duration_s: float,
+    rng: np.random.Generator,
+) -> np.ndarray:
     """Pitch in semitones relative to the base F0, ``(n_control,)`` at :data:`CONTROL_RATE_HZ`."""
     n_control = int(np.ceil(duration_s * CONTROL_RATE_HZ)) + 2
     times = np.arange(n_control) / CONTROL_RATE_HZ
@@ -244,8 +329,9 @@ def _pitch_contour(utterances: list[Phrase], syllables: list[Syllable],
     # Declination: from +D/2 at each phrase start down to -D/2 at its end (held between phrases).
     half = config.declination_semitones / 2
     knots_t = np.array([[u.start, u.end] for u in utterances]).ravel()
-    knots_v = np.array([[half, -half] if u.kind == "phrase" else [0.0, 0.0]
-                        for u in utterances]).ravel()
+    knots_v = np.array(
+        [[half, -half] if u.kind == "phrase" else [0.0, 0.0] for u in utterances]
+    ).ravel()
     pitch += np.interp(times, knots_t, knots_v)
     # The final fall (or rise) over the last syllable of each utterance.
     for start, end, semitones in pitch_moves:

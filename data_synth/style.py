@@ -54,6 +54,4 @@ class Style:
 
 def draw_style(ranges: StyleRanges, rng: np.random.Generator) -> Style:
     """Draw each style parameter uniformly from its range."""
-    return Style(**{
-        f.name: float(rng.uniform(*getattr(ranges, f.name))) for f in fields(Style)
-    })
+    return Style(**{f.name: float(rng.uniform(*getattr(ranges, f.name))) for f in fields(Style)})

@@ -83,16 +83,22 @@ class Voice:
 def draw_voices(config: VoiceConfig, rng: np.random.Generator) -> dict[str, Voice]:
     """Draw the two voices of a conversation: ``{"A": Voice, "B": Voice}``."""
     return {
-        "A": Voice("A", float(rng.uniform(*config.a_f0_hz)), float(rng.uniform(0.97, 1.03)),
-                   0.0, None),
-        "B": Voice("B", float(rng.uniform(*config.b_f0_hz)),
-                   float(config.b_formant_scale * rng.uniform(0.97, 1.03)),
-                   config.b_level_db, config.b_lowpass_hz),
+        "A": Voice(
+            "A", float(rng.uniform(*config.a_f0_hz)), float(rng.uniform(0.97, 1.03)), 0.0, None
+        ),
+        "B": Voice(
+            "B",
+            float(rng.uniform(*config.b_f0_hz)),
+            float(config.b_formant_scale * rng.uniform(0.97, 1.03)),
+            config.b_level_db,
+            config.b_lowpass_hz,
+        ),
     }
 
 
-def synthesize_speech(plan: SpeechPlan, voice: Voice, n_samples: int, sample_rate: int,
-                      rng: np.random.Generator) -> np.ndarray:
+def synthesize_speech(
+    plan: SpeechPlan, voice: Voice, n_samples: int, sample_rate: int, rng: np.random.Generator
+) -> np.ndarray:
     """Render one speaker's plan into a track ``(n_samples,)`` float64 at ``sample_rate``."""
     track = np.zeros(n_samples)
     segments = plan.segments
@@ -103,8 +109,15 @@ def synthesize_speech(plan: SpeechPlan, voice: Voice, n_samples: int, sample_rat
     ring = int(RING_S * sample_rate)
     voiced_kinds = [SEGMENT_KINDS.index(k) for k in VOWELS + VOICED_CONSONANTS]
     is_voiced = np.isin(segments.kind, voiced_kinds)
-    source = _glottal_source(plan.pitch_semitones, voice.f0_hz, starts[is_voiced],
-                             lengths[is_voiced] + ring, n_samples, sample_rate, rng)
+    source = _glottal_source(
+        plan.pitch_semitones,
+        voice.f0_hz,
+        starts[is_voiced],
+        lengths[is_voiced] + ring,
+        n_samples,
+        sample_rate,
+        rng,
+    )
     lowpass = None
     if voice.lowpass_hz is not None:
         lowpass = scipy.signal.butter(2, voice.lowpass_hz, fs=sample_rate, output="sos")
@@ -116,8 +129,11 @@ def synthesize_speech(plan: SpeechPlan, voice: Voice, n_samples: int, sample_rat
         index, local, row = _gather(starts[rows], lengths[rows] + ring, n_samples)
         seconds = local / sample_rate
         envelope = segments.level[rows][row] * _ramp(
-            seconds, segments.duration_s[rows][row], segments.attack_s[rows][row],
-            segments.release_s[rows][row])
+            seconds,
+            segments.duration_s[rows][row],
+            segments.attack_s[rows][row],
+            segments.release_s[rows][row],
+        )
         if kind in FORMANTS:
             sos = _formant_filter(kind, voice, sample_rate)
             excitation = source[index] + BREATHINESS * rng.standard_normal(index.size)
@@ -155,17 +171,24 @@ def _gather(starts: np.ndarray, lengths: np.ndarray, n_samples: int):
     return index[keep], local[keep], row[keep]
 
 
-def _ramp(t: np.ndarray, duration: np.ndarray, attack: np.ndarray,
-          release: np.ndarray) -> np.ndarray:
+def _ramp(
+    t: np.ndarray, duration: np.ndarray, attack: np.ndarray, release: np.ndarray
+) -> np.ndarray:
     """Raised-cosine attack and release of a segment lasting ``duration``; 0 after its end."""
     rise = np.clip(t / attack, 0.0, 1.0)
     fall = np.clip((duration - t) / release, 0.0, 1.0)
     return (0.5 - 0.5 * np.cos(np.pi * rise)) * (0.5 - 0.5 * np.cos(np.pi * fall))
 
 
-def _glottal_source(pitch_semitones: np.ndarray, f0_hz: float, starts: np.ndarray,
-                    lengths: np.ndarray, n_samples: int, sample_rate: int,
-                    rng: np.random.Generator) -> np.ndarray:
+def _glottal_source(
+    pitch_semitones: np.ndarray,
+    f0_hz: float,
+    starts: np.ndarray,
+    lengths: np.ndarray,
+    n_samples: int,
+    sample_rate: int,
+    rng: np.random.Generator,
+) -> np.ndarray:
     """A band-limited sawtooth ``(n_samples,)`` at the pitch contour, where voicing is needed.
 
     Only the samples of the voiced segments are computed; elsewhere the source is zero (those
@@ -205,11 +228,14 @@ def _formant_filter(kind: str, voice: Voice, sample_rate: int) -> np.ndarray:
     for the speaker's sawtooth source: ``(4, 6)`` second-order sections."""
     formants = [*FORMANTS[kind], FOURTH_FORMANT]
     nyquist_guard = 0.45 * sample_rate
-    sos = np.array([
-        _resonator(min(f * voice.formant_scale, nyquist_guard), b * voice.formant_scale,
-                   sample_rate)
-        for f, b in formants
-    ])
+    sos = np.array(
+        [
+            _resonator(
+                min(f * voice.formant_scale, nyquist_guard), b * voice.formant_scale, sample_rate
+            )
+            for f, b in formants
+        ]
+    )
     # Power of a sawtooth through the filter: harmonic h has amplitude ~ 1/h.
     harmonics = np.arange(1, int(sample_rate / 2 / voice.f0_hz) + 1)
     _, response = scipy.signal.sosfreqz(sos, worN=harmonics * voice.f0_hz, fs=sample_rate)

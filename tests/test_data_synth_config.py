@@ -33,8 +33,10 @@ from data_synth.kinematics import euler_matrix, minimum_jerk_path, smooth_noise,
         (lambda: TurnConfig(phrase_pause_s=(0.0, 0.5)), "phrase_pause_s"),
         (lambda: TurnConfig(a_phrases_per_turn=0.5), "a_phrases_per_turn"),
         (lambda: TurnConfig(overlap_s=(0.5, 1.0)), "overlap_s"),
-        (lambda: TurnConfig(overlap_probability=0.6, long_silence_probability=0.6),
-         "long_silence_probability"),
+        (
+            lambda: TurnConfig(overlap_probability=0.6, long_silence_probability=0.6),
+            "long_silence_probability",
+        ),
         (lambda: VoiceConfig(syllable_rate_hz=(0.0, 5.0)), "syllable_rate_hz"),
         (lambda: VoiceConfig(accent_spacing_syllables=(1, 3)), "accent_spacing_syllables"),
         (lambda: VoiceConfig(accent_spacing_syllables=(2.5, 3)), "accent_spacing_syllables"),
@@ -50,8 +52,10 @@ from data_synth.kinematics import euler_matrix, minimum_jerk_path, smooth_noise,
         (lambda: StyleRanges(symmetry=(0.5, 1.5)), "symmetry"),
         (lambda: StyleRanges(speed=(0.0, 1.0)), "speed"),
         (lambda: ConversationConfig(motion=MotionConfig(stroke_lead_s=1.5)), "stroke_lead_s"),
-        (lambda: ConversationConfig(motion=MotionConfig(stroke_duration_s=0.6)),
-         "stroke_duration_s"),
+        (
+            lambda: ConversationConfig(motion=MotionConfig(stroke_duration_s=0.6)),
+            "stroke_duration_s",
+        ),
         (lambda: ConversationConfig(sample_rate=8000), "sample_rate"),
         (lambda: ConversationConfig(fps=0), "fps"),
         (lambda: ConversationConfig(fps=25.5), "fps"),
@@ -114,7 +118,7 @@ def test_minimum_jerk_path_has_known_values_and_bell_shaped_speed():
     assert np.argmax(velocity) == pytest.approx(2000, abs=1)
     assert velocity.max() == pytest.approx(1.875 * distance / duration, rel=1e-4)
     assert abs(velocity[0]) < 1e-3 and abs(velocity[-1]) < 1e-3  # starts and stops at rest
-    held = minimum_jerk_path(np.array([0.0, 1.0]), np.array([[1.0], [2.0]]), np.array([-5., 9.]))
+    held = minimum_jerk_path(np.array([0.0, 1.0]), np.array([[1.0], [2.0]]), np.array([-5.0, 9.0]))
     np.testing.assert_allclose(held[:, 0], [1.0, 2.0])
 
 
@@ -141,8 +145,9 @@ def test_two_bone_ik_reaches_the_target_with_exact_bones_and_bends_towards_the_p
 
 
 def test_two_bone_ik_pulls_an_unreachable_target_in_along_its_direction():
-    middle, end = two_bone_ik(np.zeros((1, 3)), np.array([[100.0, 0.0, 0.0]]),
-                              np.array([0.0, -1.0, 0.0]), 30.0, 25.0)
+    middle, end = two_bone_ik(
+        np.zeros((1, 3)), np.array([[100.0, 0.0, 0.0]]), np.array([0.0, -1.0, 0.0]), 30.0, 25.0
+    )
     np.testing.assert_allclose(end, [[0.98 * 55.0, 0.0, 0.0]])
 
 

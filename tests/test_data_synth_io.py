@@ -187,9 +187,10 @@ def test_ensure_dataset_reuses_a_matching_dataset_and_regenerates_a_stale_one(tm
     assert (out / "test" / "conv_0003.wav").exists()
     ensure_dataset(out, 0.3, 1, conversation_s=6.0, progress=False)
     assert not (out / "test" / "conv_0003.wav").exists()
-    assert load_dataset(out)["train"][0].conversation_seed == first["splits"]["train"][0][
-        "conversation_seed"
-    ]
+    assert (
+        load_dataset(out)["train"][0].conversation_seed
+        == first["splits"]["train"][0]["conversation_seed"]
+    )
 
 
 def test_ensure_dataset_leaves_damaged_or_foreign_folders_to_a_person(tmp_path):

@@ -136,7 +136,7 @@ def test_motion_is_smooth_and_as_fast_as_a_real_speaker(conversation):
     assert acceleration(positions, fps).max() < 5000.0  # cm/s^2
     # Beat strokes peak at 40-200 cm/s; at rest the wrists drift at a few cm/s.
     stroke_rows = [round(s.time * fps - 1) for s in conversation.events.strokes]
-    peaks = [speeds[max(r - 1, 0): r + 2, WRISTS].max() for r in stroke_rows]
+    peaks = [speeds[max(r - 1, 0) : r + 2, WRISTS].max() for r in stroke_rows]
     assert 40.0 < np.median(peaks) < 200.0
     listening = split_by_activity(speeds[:, WRISTS], conversation.activity)[Activity.B_SPEAKS]
     assert 0.3 < np.median(listening) < 5.0
@@ -145,17 +145,22 @@ def test_motion_is_smooth_and_as_fast_as_a_real_speaker(conversation):
 def test_elbows_bend_the_natural_way(conversation):
     positions = conversation.positions.astype(np.float64)
     for side, hand in ((1.0, "left"), (-1.0, "right")):
-        shoulder, elbow, wrist = (positions[:, JOINT_INDEX[f"{hand}_{j}"]]
-                                  for j in ("shoulder", "elbow", "wrist"))
+        shoulder, elbow, wrist = (
+            positions[:, JOINT_INDEX[f"{hand}_{j}"]] for j in ("shoulder", "elbow", "wrist")
+        )
         assert np.all(elbow[:, 1] < shoulder[:, 1])  # never raised above the shoulder
         line = (wrist - shoulder) / np.linalg.norm(wrist - shoulder, axis=1, keepdims=True)
         bend = (elbow - shoulder) - np.sum((elbow - shoulder) * line, axis=1)[:, None] * line
         assert np.all(bend[:, 1] < 0)  # the elbow points down ...
         assert np.all(side * bend[:, 0] > 0)  # ... and outwards, never across the body
         upper, fore = shoulder - elbow, wrist - elbow
-        inner = np.degrees(np.arccos(np.sum(upper * fore, axis=1)
-                                     / np.linalg.norm(upper, axis=1)
-                                     / np.linalg.norm(fore, axis=1)))
+        inner = np.degrees(
+            np.arccos(
+                np.sum(upper * fore, axis=1)
+                / np.linalg.norm(upper, axis=1)
+                / np.linalg.norm(fore, axis=1)
+            )
+        )
         assert inner.min() > 30 and inner.max() < 175  # neither folded flat nor locked straight
         assert np.all(wrist[:, 2] > 10)  # the hands stay in front of the body
 
@@ -171,16 +176,29 @@ def test_style_shows_in_the_motion():
     def pinned(**values):
         return ConversationConfig(style=StyleRanges(**{k: (v, v) for k, v in values.items()}))
 
-    calm = pinned(gesture_radius_cm=6.0, hand_height_cm=2.0, speed=0.8, symmetry=0.0,
-                  handedness=1.0, beat_amplitude_cm=7.0)
-    lively = pinned(gesture_radius_cm=16.0, hand_height_cm=8.0, speed=1.25, symmetry=1.0,
-                    handedness=1.0, beat_amplitude_cm=13.0)
+    calm = pinned(
+        gesture_radius_cm=6.0,
+        hand_height_cm=2.0,
+        speed=0.8,
+        symmetry=0.0,
+        handedness=1.0,
+        beat_amplitude_cm=7.0,
+    )
+    lively = pinned(
+        gesture_radius_cm=16.0,
+        hand_height_cm=8.0,
+        speed=1.25,
+        symmetry=1.0,
+        handedness=1.0,
+        beat_amplitude_cm=13.0,
+    )
     measured = {}
     for name, config in (("calm", calm), ("lively", lively)):
         conv = generate_conversation(30.0, seed=2, config=config)
         speaking = conv.activity == Activity.A_SPEAKS
-        wrist_speed = split_by_activity(speed(conv.positions, conv.fps)[:, WRISTS],
-                                        conv.activity)[Activity.A_SPEAKS]
+        wrist_speed = split_by_activity(speed(conv.positions, conv.fps)[:, WRISTS], conv.activity)[
+            Activity.A_SPEAKS
+        ]
         measured[name] = {
             "height": conv.positions[speaking, JOINT_INDEX["right_wrist"], 1].mean(),
             "fast": np.percentile(wrist_speed, 95),
@@ -197,8 +215,14 @@ def test_style_shows_in_the_motion():
 
 
 def test_places_of_the_hands_are_ordered_from_lap_to_chest():
-    style = Style(gesture_radius_cm=12.0, hand_height_cm=16.0, speed=1.0, symmetry=0.5,
-                  handedness=0.5, beat_amplitude_cm=15.0)
+    style = Style(
+        gesture_radius_cm=12.0,
+        hand_height_cm=16.0,
+        speed=1.0,
+        symmetry=0.5,
+        handedness=0.5,
+        beat_amplitude_cm=15.0,
+    )
     rest, home, centre = rest_wrist("left"), home_wrist("left", style), gesture_centre(style)
     assert rest[1] < home[1] < centre[1] == pytest.approx(REST_WRIST[1] + 16.0)
     assert centre[1] < 50.0  # below the sternum
@@ -213,8 +237,9 @@ def test_elbow_pole_turns_from_hanging_to_lifted_as_the_hand_rises():
     low = np.tile([11.0, REST_WRIST[1], 28.0], (n, 1))  # inside the shoulder: no extra outward
     high = low + [0.0, 30.0, 4.0]
     np.testing.assert_allclose(elbow_pole(shoulder, low, 1.0, 25), np.tile(ELBOW_POLE_REST, (n, 1)))
-    np.testing.assert_allclose(elbow_pole(shoulder, high, 1.0, 25),
-                               np.tile(ELBOW_POLE_RAISED, (n, 1)))
+    np.testing.assert_allclose(
+        elbow_pole(shoulder, high, 1.0, 25), np.tile(ELBOW_POLE_RAISED, (n, 1))
+    )
     mirrored = elbow_pole(shoulder * [-1, 1, 1], high * [-1, 1, 1], -1.0, 25)
     np.testing.assert_allclose(mirrored, np.tile(ELBOW_POLE_RAISED * [-1, 1, 1], (n, 1)))
     # A hand out beyond the shoulder takes the elbow further out.
@@ -227,15 +252,18 @@ def test_hands_rise_into_a_gesture_space_in_front_of_the_chest(conversation):
     listening = conversation.activity == Activity.B_SPEAKS
     joints = {part: {} for part in ("wrist", "elbow", "upper_arm_tilt")}
     for hand in ("left", "right"):
-        wrist, elbow, shoulder = (positions[:, JOINT_INDEX[f"{hand}_{j}"]]
-                                  for j in ("wrist", "elbow", "shoulder"))
+        wrist, elbow, shoulder = (
+            positions[:, JOINT_INDEX[f"{hand}_{j}"]] for j in ("wrist", "elbow", "shoulder")
+        )
         upper_arm = elbow - shoulder
         tilt = np.degrees(np.arccos(-upper_arm[:, 1] / np.linalg.norm(upper_arm, axis=1)))
         for mode, frames in (("up", gesturing(conversation, hand)), ("listening", listening)):
             for part, values in (("wrist", wrist), ("elbow", elbow), ("upper_arm_tilt", tilt)):
                 joints[part].setdefault(mode, []).append(values[frames])
-    wrist, elbow, tilt = ({mode: np.concatenate(v) for mode, v in joints[part].items()}
-                          for part in ("wrist", "elbow", "upper_arm_tilt"))
+    wrist, elbow, tilt = (
+        {mode: np.concatenate(v) for mode, v in joints[part].items()}
+        for part in ("wrist", "elbow", "upper_arm_tilt")
+    )
     assert len(wrist["up"]) > 10 * conversation.fps  # seconds of gesturing, not moments
     height, depth = np.median(wrist["up"][:, 1]), np.median(wrist["up"][:, 2])
     assert 25.0 < height < 40.0 and 20.0 < depth < 35.0  # cm; the sternum is 50 cm up
@@ -257,8 +285,9 @@ def test_listening_hands_wait_low_with_the_elbows_under_the_shoulders(conversati
 
 
 def test_hands_sink_into_the_lap_only_when_the_agent_is_silent_for_long():
-    config = ConversationConfig(turns=TurnConfig(long_silence_probability=0.6,
-                                                 long_silence_s=(7.0, 9.0)))
+    config = ConversationConfig(
+        turns=TurnConfig(long_silence_probability=0.6, long_silence_s=(7.0, 9.0))
+    )
     conv = generate_conversation(40.0, seed=6, config=config)
     positions, times = conv.positions.astype(np.float64), frame_times(conv)
     in_lap = np.all(positions[:, WRISTS, 1] < REST_WRIST[1] + 3.0, axis=1)  # both hands
@@ -278,9 +307,13 @@ def test_hands_sink_into_the_lap_only_when_the_agent_is_silent_for_long():
 
 def test_beats_travel_their_amplitude_at_a_speakers_speed(conversation):
     emphasis = {accent.time: accent.emphasis for accent in conversation.events.accents_of("A")}
-    rule = np.array([stroke.amplitude_cm / (conversation.style.beat_amplitude_cm
-                                             * emphasis[stroke.accent_time])
-                     for stroke in conversation.events.strokes])
+    rule = np.array(
+        [
+            stroke.amplitude_cm
+            / (conversation.style.beat_amplitude_cm * emphasis[stroke.accent_time])
+            for stroke in conversation.events.strokes
+        ]
+    )
     assert np.all((rule > 0.9 - 1e-9) & (rule < 1.1 + 1e-9))  # amplitude from emphasis, +-10 %
     travel = stroke_travel(conversation)
     distance = np.array([np.linalg.norm(d) for _, _, d in travel])
@@ -293,26 +326,45 @@ def test_beats_travel_their_amplitude_at_a_speakers_speed(conversation):
     fps = conversation.fps
     speeds = speed(conversation.positions.astype(np.float64), fps)  # row r: frames r to r + 1
     duration = conversation.config.motion.stroke_duration_s / conversation.style.speed
-    peaks = np.array([speeds[max(round(stroke.time * fps) - 2, 0): round(stroke.time * fps) + 1,
-                             JOINT_INDEX[f"{hand}_wrist"]].max() for stroke, hand, _ in travel])
+    peaks = np.array(
+        [
+            speeds[
+                max(round(stroke.time * fps) - 2, 0) : round(stroke.time * fps) + 1,
+                JOINT_INDEX[f"{hand}_wrist"],
+            ].max()
+            for stroke, hand, _ in travel
+        ]
+    )
     predicted = np.array([1.875 * stroke.amplitude_cm / duration for stroke, _, _ in travel])
     assert 0.85 < np.median(peaks / predicted) < 1.05
     assert 60.0 < np.median(peaks) < 200.0 and peaks.max() < 250.0  # cm/s
 
 
 def test_stroke_forms_and_the_gesturing_hand_follow_the_style():
-    compact = pinned_style(gesture_radius_cm=0.0, hand_height_cm=15.0, speed=1.0, symmetry=0.0,
-                           handedness=1.0, beat_amplitude_cm=15.0)
-    expansive = pinned_style(gesture_radius_cm=25.0, hand_height_cm=15.0, speed=1.0,
-                             symmetry=1.0, handedness=1.0, beat_amplitude_cm=15.0)
+    compact = pinned_style(
+        gesture_radius_cm=0.0,
+        hand_height_cm=15.0,
+        speed=1.0,
+        symmetry=0.0,
+        handedness=1.0,
+        beat_amplitude_cm=15.0,
+    )
+    expansive = pinned_style(
+        gesture_radius_cm=25.0,
+        hand_height_cm=15.0,
+        speed=1.0,
+        symmetry=1.0,
+        handedness=1.0,
+        beat_amplitude_cm=15.0,
+    )
     outward_share = {}
     for name, config in (("compact", compact), ("expansive", expansive)):
         conv = generate_conversation(30.0, seed=5, config=config)
         travel = stroke_travel(conv)
         # An outward sweep moves the wrist away from the midline by at least 40 % of its travel.
-        outward_share[name] = np.mean([
-            (d[0] if hand == "left" else -d[0]) > 0.4 * np.linalg.norm(d) for _, hand, d in travel
-        ])
+        outward_share[name] = np.mean(
+            [(d[0] if hand == "left" else -d[0]) > 0.4 * np.linalg.norm(d) for _, hand, d in travel]
+        )
         if name == "compact":  # right-handed, one hand at a time: the left one stays low
             positions = conv.positions.astype(np.float64)
             assert {p.hands for p in conv.events.gesture_phrases} == {"right"}
@@ -345,9 +397,11 @@ def test_listening_is_calmer_and_closer_to_the_mean_pose_across_conversations():
         positions = conv.positions.astype(np.float64)
         for mode, code in (("speaking", Activity.A_SPEAKS), ("listening", Activity.B_SPEAKS)):
             speeds.setdefault(mode, []).append(
-                split_by_activity(speed(positions, conv.fps)[:, WRISTS], conv.activity)[code])
+                split_by_activity(speed(positions, conv.fps)[:, WRISTS], conv.activity)[code]
+            )
             distances.setdefault(mode, []).append(
-                split_by_activity(distance_from_mean_pose(positions), conv.activity)[code])
+                split_by_activity(distance_from_mean_pose(positions), conv.activity)[code]
+            )
     wrist_speed = {mode: np.concatenate(v).mean() for mode, v in speeds.items()}
     distance = {mode: np.concatenate(v) for mode, v in distances.items()}
     assert wrist_speed["listening"] < 0.5 * wrist_speed["speaking"]
@@ -360,8 +414,9 @@ def test_listening_is_calmer_and_closer_to_the_mean_pose_across_conversations():
 def test_wrist_speed_leads_the_audio_emphasis_by_the_configured_time(lead_s):
     config = ConversationConfig(motion=MotionConfig(stroke_lead_s=lead_s))
     conv = generate_conversation(40.0, seed=21, config=config)
-    measured = measure_stroke_lead(conv.audio, conv.sample_rate, conv.activity, conv.positions,
-                                   conv.fps)
+    measured = measure_stroke_lead(
+        conv.audio, conv.sample_rate, conv.activity, conv.positions, conv.fps
+    )
     assert measured == pytest.approx(lead_s, abs=1.0 / conv.fps)
 
 
@@ -379,7 +434,8 @@ def test_the_agent_nods_after_the_partners_phrases_while_listening():
     # A talkative partner gives many phrase ends to answer; every one is answered with a nod.
     config = ConversationConfig(
         turns=TurnConfig(b_phrases_per_turn=3.0, a_phrases_per_turn=1.5),
-        motion=MotionConfig(listening_nod_probability=1.0))
+        motion=MotionConfig(listening_nod_probability=1.0),
+    )
     conv = generate_conversation(50.0, seed=4, config=config)
     positions, fps, times = conv.positions.astype(np.float64), conv.fps, frame_times(conv)
     head_to_nose = positions[:, JOINT_INDEX["nose"]] - positions[:, JOINT_INDEX["head"]]

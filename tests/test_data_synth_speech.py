@@ -26,8 +26,14 @@ def test_activity_codes_follow_the_utterances_at_frame_centres():
     utterances = [Phrase("A", 0.1, 0.3), Phrase("B", 0.25, 0.45, "backchannel")]
     # Frame centres at 10 fps: 0.05, 0.15, 0.25, 0.35, 0.45, 0.55.
     codes = activity_codes(utterances, 6, 10)
-    expected = [Activity.NONE, Activity.A_SPEAKS, Activity.BOTH, Activity.B_SPEAKS,
-                Activity.NONE, Activity.NONE]
+    expected = [
+        Activity.NONE,
+        Activity.A_SPEAKS,
+        Activity.BOTH,
+        Activity.B_SPEAKS,
+        Activity.NONE,
+        Activity.NONE,
+    ]
     np.testing.assert_array_equal(codes, expected)
     assert codes.dtype == np.int64
 
@@ -46,8 +52,9 @@ def test_turn_taking_has_its_ingredients_and_a_speaks_more():
         own = [u for u in utterances if u.speaker == speaker]
         assert all(b.start >= a.end for a, b in zip(own, own[1:], strict=False))
     assert utterances[-1].end <= duration and all(u.end > u.start for u in utterances)
-    phrases = np.array([u.end - u.start for u in utterances if u.speaker == "A"
-                        and u.kind == "phrase"])
+    phrases = np.array(
+        [u.end - u.start for u in utterances if u.speaker == "A" and u.kind == "phrase"]
+    )
     assert phrases.min() >= 1.2 and phrases.max() <= 3.0
 
 
@@ -100,8 +107,9 @@ def test_speakers_have_their_pitch(conversation):
     audio, sample_rate = conversation.audio, conversation.sample_rate
     hop = sample_rate // 100
     f0 = librosa.yin(audio, fmin=60, fmax=400, sr=sample_rate, frame_length=1024, hop_length=hop)
-    frames = np.minimum(np.arange(f0.size) * hop * conversation.fps // sample_rate,
-                        conversation.num_frames - 1)
+    frames = np.minimum(
+        np.arange(f0.size) * hop * conversation.fps // sample_rate, conversation.num_frames - 1
+    )
     rms = librosa.feature.rms(y=audio, frame_length=1024, hop_length=hop)[0][: f0.size]
     voiced = rms > 0.05 * rms.max()
     f0_a = np.median(f0[voiced & (conversation.activity[frames] == Activity.A_SPEAKS)])
@@ -118,14 +126,16 @@ def test_stressed_syllables_are_louder_and_longer(conversation):
     syllables = [s for s in conversation.events.syllables if s.speaker == "A"]
 
     def peak_loudness(s):
-        return level[int(s.vowel_onset * fps): int(s.end * fps) + 1].max()
+        return level[int(s.vowel_onset * fps) : int(s.end * fps) + 1].max()
 
     stressed = [s for s in syllables if s.emphasis > 0]
     unstressed = [s for s in syllables if s.emphasis == 0]
     assert len(stressed) > 20 and len(unstressed) > 2 * len(stressed)
     ratio = np.median([peak_loudness(s) for s in stressed]) / np.median(
-        [peak_loudness(s) for s in unstressed])
+        [peak_loudness(s) for s in unstressed]
+    )
     assert ratio > 1.3  # at least +4 dB of power (loudness ~ power ** 0.3)
     duration = np.median([s.end - s.start for s in stressed]) / np.median(
-        [s.end - s.start for s in unstressed])
+        [s.end - s.start for s in unstressed]
+    )
     assert duration > 1.2
