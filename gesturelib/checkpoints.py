@@ -464,13 +464,30 @@ def _hash_value(hasher, value) -> None:
         hasher.update(repr(value).encode())
 
 
-def run_key(model_class: str, model_config: dict, train_config: dict, data_fingerprint: str) -> str:
+def state_fingerprint(model: nn.Module) -> str:
+    """A short hash of a model's weights and buffers (names, shapes, dtypes and values)."""
+    hasher = hashlib.sha256()
+    for name, tensor in sorted(model.state_dict().items()):
+        hasher.update(f"<{name}>".encode())
+        _hash_value(hasher, tensor)
+    return hasher.hexdigest()[:16]
+
+
+def run_key(
+    model_class: str,
+    model_config: dict,
+    train_config: dict,
+    data_fingerprint: str,
+    initial_state: str | None = None,
+) -> str:
     """A stable 12-hex-digit hash of what determines a trained model.
 
     Args:
         model_class: the class name.
         model_config, train_config: as dicts, leaving out fields that do not change the result.
         data_fingerprint: identifies the data (:func:`dataset_fingerprint`).
+        initial_state: :func:`state_fingerprint` of the untrained model, where its config and
+            seed do not determine it (a model holding a trained one); None otherwise.
     """
     identity = {
         "model_class": model_class,
@@ -478,4 +495,6 @@ def run_key(model_class: str, model_config: dict, train_config: dict, data_finge
         "train_config": train_config,
         "data": data_fingerprint,
     }
+    if initial_state is not None:  # only then: keys of ordinary runs stay as they were
+        identity["initial_state"] = initial_state
     return hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:12]

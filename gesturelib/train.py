@@ -65,9 +65,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -83,6 +84,7 @@ from gesturelib.checkpoints import (
     load_state,
     read_checkpoint,
     run_key,
+    state_fingerprint,
 )
 from gesturelib.history import History
 
@@ -582,6 +584,7 @@ def load_or_train(
     cache_dir: str | Path,
     normaliser=None,
     *,
+    build: Callable[[Any], nn.Module] | None = None,
     data_fingerprint: str | None = None,
     progress: bool = True,
 ) -> tuple[nn.Module, History]:
@@ -598,26 +601,36 @@ def load_or_train(
         model_config: its config dataclass.
         train_data, val_data, train_config, normaliser: as for :func:`train`.
         cache_dir: the folder of cached runs.
+        build: makes the untrained model from ``model_config`` where ``model_class(config)`` is
+            not enough: a model that holds another, already trained one, e.g.
+            ``lambda config: Aud2Repr2Pose.from_autoencoder(denoiser, config)``. It must return a
+            ``model_class``. The hash then also covers the returned model's weights and buffers
+            (:func:`state_fingerprint`), so that a retrained inner model never brings back a
+            cached run trained around the old one.
         data_fingerprint: identifies the data; by default :func:`dataset_fingerprint` of both.
         progress: show the progress bar while training, or a line naming the file loaded.
     Returns:
         ``(model, history)``: the model with its best weights, on ``train_config.device``, in
         eval mode, and how its training went.
     """
-    model_dict = config_to_dict(model_config)
+    with torch.random.fork_rng(devices=[]):  # the initial weights depend on the seed alone
+        torch.manual_seed(train_config.seed)
+        model = model_class(model_config) if build is None else build(model_config)
+    if not isinstance(model, model_class):
+        raise TypeError(f"build must return a {model_class.__name__}, got {type(model).__name__}")
+    # With build, the model's own config is the truth (build may complete the one passed).
+    model_dict = config_to_dict(model_config if build is None else model.config)
     train_dict = config_to_dict(train_config)
     fingerprint = data_fingerprint or dataset_fingerprint(train_data, val_data)
     key_config = {k: v for k, v in train_dict.items() if k not in EXECUTION_FIELDS}
-    key = run_key(model_class.__name__, model_dict, key_config, fingerprint)
+    initial_state = None if build is None else state_fingerprint(model)
+    key = run_key(model_class.__name__, model_dict, key_config, fingerprint, initial_state)
     folder = RunFolder(
         Path(cache_dir) / f"{model_class.__name__}-{key}",
         model_class.__name__,
         model_dict,
         train_dict,
     )
-    with torch.random.fork_rng(devices=[]):  # the initial weights depend on the seed alone
-        torch.manual_seed(train_config.seed)
-        model = model_class(model_config)
     if folder.best.exists():
         checkpoint = read_checkpoint(folder.best, kind="best")
         folder.check(checkpoint, folder.best, EXECUTION_FIELDS, advice="Delete it to retrain.")

@@ -579,3 +579,87 @@ def test_resume_on_a_gpu_equals_uninterrupted_training_and_loads_on_the_cpu(tmp_
     assert_same_weights(weights(resumed), weights(model))
     on_cpu = load_model(tmp_path / "best.pt", ToyRegressor)
     assert_same_weights(weights(on_cpu), {k: v.cpu() for k, v in weights(model).items()})
+
+
+class Stacked(ToyRegressor):
+    """A regressor holding a frozen, separately trained one (as Aud2Repr2Pose holds its
+    autoencoder); ``from_inner`` is how it must be built."""
+
+    calls = 0
+
+    def __init__(self, config: ToyConfig):
+        super().__init__(config)
+        self.inner = ToyRegressor(ToyConfig()).requires_grad_(False)
+
+    @classmethod
+    def from_inner(cls, inner: ToyRegressor, config: ToyConfig) -> "Stacked":
+        model = cls(config)
+        model.inner.load_state_dict(inner.state_dict())
+        return model
+
+    def loss(self, batch):
+        Stacked.calls += 1
+        return super().loss(batch)
+
+
+def test_load_or_train_with_build_keys_the_run_by_the_inner_model(tmp_path):
+    inner = make_model(seed=1)
+    other_inner = make_model(seed=2)
+
+    def stacked_on(inner_model):
+        return lambda config: Stacked.from_inner(inner_model, config)
+
+    Stacked.calls = 0
+    model, _ = load_or_train(
+        Stacked,
+        ToyConfig(),
+        TRAIN,
+        VAL,
+        config(),
+        tmp_path,
+        build=stacked_on(inner),
+        progress=False,
+    )
+    assert_same_weights(weights(model.inner), weights(inner))  # built by build, then trained
+    first_calls = Stacked.calls
+    again, _ = load_or_train(
+        Stacked,
+        ToyConfig(),
+        TRAIN,
+        VAL,
+        config(),
+        tmp_path,
+        build=stacked_on(inner),
+        progress=False,
+    )
+    assert Stacked.calls == first_calls  # loaded from the cache
+    assert_same_weights(weights(again), weights(model))
+
+    # Another inner model is another run, never the cached one.
+    other, _ = load_or_train(
+        Stacked,
+        ToyConfig(),
+        TRAIN,
+        VAL,
+        config(),
+        tmp_path,
+        build=stacked_on(other_inner),
+        progress=False,
+    )
+    assert Stacked.calls == 2 * first_calls and len(list(tmp_path.iterdir())) == 2
+    assert_same_weights(weights(other.inner), weights(other_inner))
+
+
+def test_load_or_train_refuses_a_build_of_another_class(tmp_path):
+    with pytest.raises(TypeError, match="build must return a Stacked, got ToyRegressor"):
+        load_or_train(
+            Stacked,
+            ToyConfig(),
+            TRAIN,
+            VAL,
+            config(),
+            tmp_path,
+            build=lambda config: ToyRegressor(config),
+            progress=False,
+        )
+    assert not any(tmp_path.iterdir())
