@@ -607,45 +607,21 @@ def test_load_or_train_with_build_keys_the_run_by_the_inner_model(tmp_path):
     other_inner = make_model(seed=2)
 
     def stacked_on(inner_model):
-        return lambda config: Stacked.from_inner(inner_model, config)
+        build = lambda config: Stacked.from_inner(inner_model, config)  # noqa: E731
+        model, _ = load_or_train(
+            Stacked, ToyConfig(), TRAIN, VAL, config(), tmp_path, build=build, progress=False
+        )
+        return model
 
     Stacked.calls = 0
-    model, _ = load_or_train(
-        Stacked,
-        ToyConfig(),
-        TRAIN,
-        VAL,
-        config(),
-        tmp_path,
-        build=stacked_on(inner),
-        progress=False,
-    )
+    model = stacked_on(inner)
     assert_same_weights(weights(model.inner), weights(inner))  # built by build, then trained
     first_calls = Stacked.calls
-    again, _ = load_or_train(
-        Stacked,
-        ToyConfig(),
-        TRAIN,
-        VAL,
-        config(),
-        tmp_path,
-        build=stacked_on(inner),
-        progress=False,
-    )
+    assert_same_weights(weights(stacked_on(inner)), weights(model))
     assert Stacked.calls == first_calls  # loaded from the cache
-    assert_same_weights(weights(again), weights(model))
 
     # Another inner model is another run, never the cached one.
-    other, _ = load_or_train(
-        Stacked,
-        ToyConfig(),
-        TRAIN,
-        VAL,
-        config(),
-        tmp_path,
-        build=stacked_on(other_inner),
-        progress=False,
-    )
+    other = stacked_on(other_inner)
     assert Stacked.calls == 2 * first_calls and len(list(tmp_path.iterdir())) == 2
     assert_same_weights(weights(other.inner), weights(other_inner))
 
