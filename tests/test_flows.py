@@ -21,6 +21,7 @@ from gesturelib.flows import (
     AffineCoupling,
     FlowStep,
     InvertibleLinear,
+    MLPConditioner,
     StandardNormal,
     StudentT,
     glow,
@@ -152,6 +153,25 @@ def test_actnorm_state_survives_save_and_load():
     other_batch = -7.0 + 10.0 * torch.randn(64, 3, generator=generator)
     torch.testing.assert_close(fresh(other_batch)[0], trained(other_batch)[0])
     torch.testing.assert_close(fresh.loc, trained.loc)  # not re-initialised from other_batch
+
+
+@pytest.mark.parametrize("scale", [0.01, 1.0, 100.0])
+def test_mlp_conditioner_hidden_units_start_standardised_whatever_the_input_scale(scale):
+    # With a zero-initialised last layer, the hidden features are what a coupling learns from
+    # first: each must start at zero mean and unit variance before its ReLU.
+    conditioner = MLPConditioner(3, 4, hidden=32, num_layers=2)
+    inputs = scale * (1.0 + torch.randn(20, 6, 3, generator=torch.Generator().manual_seed(0)))
+    pre_activations = []
+    for layer in conditioner.hidden_layers:
+        if isinstance(layer, torch.nn.ReLU):
+            layer.register_forward_hook(lambda _, args, __: pre_activations.append(args[0]))
+    outputs, _ = conditioner(inputs)
+    assert outputs.shape == (20, 6, 4) and not outputs.any()  # zero last layer
+    assert len(pre_activations) == 2
+    for hidden in pre_activations:
+        units = hidden.reshape(-1, 32)
+        torch.testing.assert_close(units.mean(0), torch.zeros(32), atol=1e-4, rtol=0)
+        torch.testing.assert_close(units.var(0, unbiased=False), torch.ones(32), atol=5e-3, rtol=0)
 
 
 def test_whole_flow_state_survives_save_and_load():
