@@ -18,7 +18,7 @@ the density is known in closed form the script also prints its entropy, the best
 reach.
 
 Usage:
-    .venv/bin/python benchmarks/flows_vs_reference.py          # about 40 minutes on 2 idle cores
+    .venv/bin/python benchmarks/flows_vs_reference.py          # about 45 minutes on one core
     .venv/bin/python benchmarks/flows_vs_reference.py --checkpoints 100 300 --seeds 1  # smoke run
 """
 
