@@ -71,7 +71,11 @@ class HiddenActNorm(nn.Module):
         self.actnorm = ActNorm(features)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.actnorm(x.reshape(-1, x.shape[-1]))[0].reshape(x.shape)
+        actnorm = self.actnorm
+        if not actnorm.initialized:
+            actnorm.initialize(x.reshape(-1, x.shape[-1]))
+        # The affine map alone: no shape checks or log-determinant on this hot path.
+        return (x - actnorm.loc) * torch.exp(actnorm.log_scale)
 
 
 class MLPConditioner(nn.Module):
