@@ -18,7 +18,9 @@ the density is known in closed form the script also prints its entropy, the best
 reach.
 
 Usage:
-    .venv/bin/python benchmarks/flows_vs_reference.py          # about 45 minutes on one core
+    .venv/bin/python benchmarks/flows_vs_reference.py   # every density and model: 1.5-2 h, one core
+    .venv/bin/python benchmarks/flows_vs_reference.py --densities two_moons --threads 1 &  # one
+    # density per process uses more cores (the README's table: --models RealNVP rotation)
     .venv/bin/python benchmarks/flows_vs_reference.py --checkpoints 100 300 --seeds 1  # smoke run
 """
 

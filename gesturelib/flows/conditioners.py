@@ -22,8 +22,9 @@ With that zero layer, a coupling first learns by reweighting the hidden features
 so their scale matters. As in Glow's own coupling networks, the MLP therefore puts an ActNorm after
 each hidden linear layer, initialised from the first batch so that every hidden unit starts with
 zero mean and unit variance before its ReLU, whatever the scale of the inputs. Without it, flows
-on the 2D toy densities of ``benchmarks/flows_vs_reference.py`` learned measurably slower (0.05
-nats worse held-out NLL on eight Gaussians after 4000 steps, mean of 4 seeds).
+on the 2D toy densities of ``benchmarks/flows_vs_reference.py`` learned measurably slower: after
+10 000 steps, held-out NLL 1.842 nats on eight Gaussians without it, 1.809 with it (means of 4
+seeds).
 
 A custom conditioner can be passed to a coupling if it has the same interface and the attributes
 ``in_features``, ``out_features`` and ``recurrent``.
