@@ -78,10 +78,14 @@ class ActNorm(nn.Module):
             (summed over its ``T`` frames).
         """
         check_features(x, self.dim)
+        return self.normalise(x), self._logdet(x, sign=1.0)
+
+    def normalise(self, x: torch.Tensor) -> torch.Tensor:
+        """``y = (x - loc) * exp(log_scale)`` alone, for ``x`` ``(..., D)``: no shape check and no
+        log-determinant (for use inside a network). Initialises from ``x`` on the first call."""
         if not bool(self.initialized):
-            self.initialize(x)
-        y = (x - self.loc) * torch.exp(self.log_scale)
-        return y, self._logdet(x, sign=1.0)
+            self.initialize(x.reshape(-1, self.dim))
+        return (x - self.loc) * torch.exp(self.log_scale)
 
     def inverse(self, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Noise -> data: ``x = y * exp(-log_scale) + loc``.

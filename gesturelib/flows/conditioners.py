@@ -72,11 +72,7 @@ class HiddenActNorm(nn.Module):
         self.actnorm = ActNorm(features)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        actnorm = self.actnorm
-        if not actnorm.initialized:
-            actnorm.initialize(x.reshape(-1, x.shape[-1]))
-        # The affine map alone: no shape checks or log-determinant on this hot path.
-        return (x - actnorm.loc) * torch.exp(actnorm.log_scale)
+        return self.actnorm.normalise(x)  # no checks or log-determinant on this hot path
 
 
 class MLPConditioner(nn.Module):
