@@ -220,18 +220,17 @@ def ensure_dataset(
                 f"{error}; delete the folder or regenerate it with "
                 f"`python -m data_synth --out {out_dir} --overwrite`"
             ) from error
-        differences = [key for key, value in wanted.items() if manifest.get(key) != value]
+        differences = {key: value for key, value in wanted.items() if manifest.get(key) != value}
         if not differences:
             return manifest
+        reasons = [
+            "generator settings"
+            if key == "config"
+            else f"{key} ({manifest.get(key)!r}, now {value!r})"
+            for key, value in differences.items()
+        ]
         print(
-            f"Regenerating the dataset in {out_dir}: it was made with different "
-            + ", ".join(
-                f"{key} ({manifest.get(key)!r}, now {value!r})"
-                if key != "config"
-                else "generator settings"
-                for key, value in wanted.items()
-                if key in differences
-            )
+            f"Regenerating the dataset in {out_dir}: it was made with different {', '.join(reasons)}"
         )
         stale = True
     return write_dataset(
