@@ -27,6 +27,7 @@ from gesturelib.flows import (
     glow,
 )
 from gesturelib.flows.base import sample_standard_gamma
+from gesturelib.flows.conditioners import ZeroLinear
 
 DIM, COND, BATCH, FRAMES = 4, 3, 5, 3
 
@@ -172,6 +173,17 @@ def test_mlp_conditioner_hidden_units_start_standardised_whatever_the_input_scal
         units = hidden.reshape(-1, 32)
         torch.testing.assert_close(units.mean(0), torch.zeros(32), atol=1e-4, rtol=0)
         torch.testing.assert_close(units.var(0, unbiased=False), torch.ones(32), atol=5e-3, rtol=0)
+
+
+def test_zero_linear_starts_at_zero_and_scales_its_outputs_by_the_learned_gain():
+    layer = ZeroLinear(5, 3)
+    x = torch.randn(7, 5, generator=torch.Generator().manual_seed(0))
+    assert not layer(x).any()  # the coupling starts as the identity
+    randomise(layer)
+    plain = torch.nn.functional.linear(x, layer.weight, layer.bias)
+    with torch.no_grad():
+        layer.log_gain.copy_(torch.tensor([0.0, math.log(2.0), -math.log(4.0)]) / 3.0)
+    torch.testing.assert_close(layer(x), plain * torch.tensor([1.0, 2.0, 0.25]))
 
 
 def test_whole_flow_state_survives_save_and_load():
