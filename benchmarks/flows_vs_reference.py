@@ -113,7 +113,13 @@ def main() -> None:
     parser.add_argument("--hidden", type=int, default=64, help="our conditioner width")
     parser.add_argument("--batch", type=int, default=256)
     parser.add_argument("--lr", type=float, default=1e-3, help="initial learning rate")
-    parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--seeds", type=int, default=4, help="how many seeds")
+    parser.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="seeds run from this one (to split seeds across processes)",
+    )
     parser.add_argument(
         "--models",
         nargs="+",
@@ -128,10 +134,11 @@ def main() -> None:
     if args.threads:
         torch.set_num_threads(args.threads)
     checkpoints = sorted(set(args.checkpoints))
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
 
     print(
         f"K={args.flow_steps} couplings, Adam (lr {args.lr} cosine-annealed to 0), batch {args.batch}, "
-        f"{TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds 0..{args.seeds - 1}, "
+        f"{TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds {seeds[0]}..{seeds[-1]}, "
         f"torch threads {torch.get_num_threads()}; held-out NLL in nats, mean ± sd over seeds\n"
     )
     columns = "".join(f"{f'after {c} steps':>18}" for c in checkpoints)
@@ -146,7 +153,7 @@ def main() -> None:
         results = {key: [] for key in models}
         seconds = dict.fromkeys(models, 0.0)
         params = {}
-        for seed in range(args.seeds):
+        for seed in seeds:
             for key, linear_init in models.items():
                 ours = build_ours(args.flow_steps, args.hidden, seed, linear_init or "rotation")
                 model, log_prob = (
