@@ -133,6 +133,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
+    if args.seeds < 1:
+        parser.error(f"--seeds must be at least 1, got {args.seeds}")
     checkpoints = sorted(set(args.checkpoints))
     seeds = range(args.first_seed, args.first_seed + args.seeds)
 
