@@ -21,6 +21,8 @@ Usage:
     .venv/bin/python benchmarks/flows_vs_reference.py   # every density and model: 1.5-2 h, one core
     .venv/bin/python benchmarks/flows_vs_reference.py --densities two_moons --threads 1 &  # one
     # density per process uses more cores (the README's table: --models RealNVP rotation)
+    .venv/bin/python benchmarks/flows_vs_reference.py --densities two_moons --first-seed 4 &  # seeds
+    # 4..7 in another process; each model's final NLL is also printed per seed, to pool the runs
     .venv/bin/python benchmarks/flows_vs_reference.py --checkpoints 100 300 --seeds 1  # smoke run
 """
 
@@ -135,6 +137,8 @@ def main() -> None:
         torch.set_num_threads(args.threads)
     if args.seeds < 1:
         parser.error(f"--seeds must be at least 1, got {args.seeds}")
+    if args.first_seed < 0:
+        parser.error(f"--first-seed must be non-negative, got {args.first_seed}")
     checkpoints = sorted(set(args.checkpoints))
     seeds = range(args.first_seed, args.first_seed + args.seeds)
 
@@ -175,6 +179,10 @@ def main() -> None:
                 spread = statistics.stdev(column) if len(column) > 1 else 0.0
                 figures += f"{f'{statistics.mean(column):.3f} ± {spread:.3f}':>18}"
             print(f"{name:16} {key:24} {params[key]:7d}{figures} {seconds[key] / args.seeds:8.1f}")
+            finals = ", ".join(
+                f"{seed}: {run[-1]:.4f}" for seed, run in zip(seeds, runs, strict=True)
+            )
+            print(f"{'':16} {'  final NLL per seed':24} {finals}")
         if name in TRUE_LOG_PROB:
             entropy = -TRUE_LOG_PROB[name](test_x.double()).mean().item()
             print(f"{name:16} {'true density (entropy)':24} {'':7}{f'{entropy:.3f}':>18}")

@@ -34,6 +34,8 @@ def test_flows_against_zuko_prints_a_row_per_model():
         "6",
         "--seeds",
         "2",
+        "--first-seed",
+        "3",
         "--flow-steps",
         "2",
         "--hidden",
@@ -48,6 +50,9 @@ def test_flows_against_zuko_prints_a_row_per_model():
     assert len(rows) == 4, output
     params = {model: int(re.search(r"\s(\d+)\s", rows[model]).group(1)) for model in list(rows)[:3]}
     assert params["zuko RealNVP"] >= params["Glow rotation"]  # never the smaller budget for zuko
+    assert "seeds 3..4" in output.splitlines()[0]
+    per_seed = [row for row in output.splitlines() if "final NLL per seed" in row]
+    assert len(per_seed) == 3 and all(re.search(r"3: \S+, 4: \S+$", row) for row in per_seed)
 
 
 def test_flow_speed_benchmark_runs():

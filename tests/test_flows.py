@@ -24,10 +24,11 @@ from gesturelib.flows import (
     MLPConditioner,
     StandardNormal,
     StudentT,
+    ZeroLinear,
     glow,
+    make_conditioner,
 )
 from gesturelib.flows.base import sample_standard_gamma
-from gesturelib.flows.conditioners import ZeroLinear
 
 DIM, COND, BATCH, FRAMES = 4, 3, 5, 3
 
@@ -179,11 +180,19 @@ def test_zero_linear_starts_at_zero_and_scales_its_outputs_by_the_learned_gain()
     layer = ZeroLinear(5, 3)
     x = torch.randn(7, 5, generator=torch.Generator().manual_seed(0))
     assert not layer(x).any()  # the coupling starts as the identity
+    assert not layer.log_gain.any()  # with a gain of exactly 1
     randomise(layer)
     plain = torch.nn.functional.linear(x, layer.weight, layer.bias)
     with torch.no_grad():
         layer.log_gain.copy_(torch.tensor([0.0, math.log(2.0), -math.log(4.0)]) / 3.0)
     torch.testing.assert_close(layer(x), plain * torch.tensor([1.0, 2.0, 0.25]))
+    layer.reset_parameters()
+    assert not any(parameter.any() for parameter in layer.parameters())
+
+
+@pytest.mark.parametrize("conditioner", ["mlp", "lstm", "gru"])
+def test_every_conditioner_ends_in_a_zero_linear_layer(conditioner):
+    assert isinstance(make_conditioner(conditioner, 3, 4).output, ZeroLinear)
 
 
 def test_whole_flow_state_survives_save_and_load():

@@ -16,8 +16,8 @@ noise -> data, both returning the output and its log-determinant per sample ``(B
 * :class:`InvertibleLinear` (:mod:`~gesturelib.flows.linear`): Glow's invertible 1x1 convolution
   on vectors, LU-decomposed.
 * :class:`AffineCoupling`, :class:`AdditiveCoupling` (:mod:`~gesturelib.flows.coupling`) with
-  :class:`MLPConditioner`, :class:`LSTMConditioner` or :class:`GRUConditioner`
-  (:mod:`~gesturelib.flows.conditioners`).
+  :class:`MLPConditioner`, :class:`LSTMConditioner` or :class:`GRUConditioner`, each ending in
+  a :class:`ZeroLinear` layer (:mod:`~gesturelib.flows.conditioners`).
 * :class:`StandardNormal`, :class:`StudentT` (:mod:`~gesturelib.flows.base`): base distributions.
 * :class:`FlowStep` (ActNorm -> linear -> coupling), :class:`Flow` and the factory :func:`glow`
   (:mod:`~gesturelib.flows.flow`), which also documents the conventions for conditions,
@@ -37,6 +37,7 @@ from gesturelib.flows.conditioners import (
     GRUConditioner,
     LSTMConditioner,
     MLPConditioner,
+    ZeroLinear,
     make_conditioner,
 )
 from gesturelib.flows.coupling import AdditiveCoupling, AffineCoupling
@@ -57,6 +58,7 @@ __all__ = [
     "MLPConditioner",
     "StandardNormal",
     "StudentT",
+    "ZeroLinear",
     "glow",
     "make_conditioner",
     "random_rotation",
