@@ -66,12 +66,14 @@ class ZeroLinear(nn.Linear):
         self, in_features: int, out_features: int, gain_factor: float = 3.0, device=None, dtype=None
     ):
         super().__init__(in_features, out_features, device=device, dtype=dtype)
-        self.log_gain = nn.Parameter(torch.empty(out_features, device=device, dtype=dtype))
+        self.log_gain = nn.Parameter(torch.zeros(out_features, device=device, dtype=dtype))
         self.gain_factor = float(gain_factor)
-        self.reset_parameters()
 
     def reset_parameters(self) -> None:
         """Back to the zero start: weight, bias and log-gain all zero."""
+        # nn.Linear's random draw is kept, then overwritten, so that a seed builds the same flow
+        # as the one the figures quoted in the docs and README were measured with.
+        super().reset_parameters()
         nn.init.zeros_(self.weight)
         nn.init.zeros_(self.bias)
         if hasattr(self, "log_gain"):  # nn.Linear.__init__ calls this before log_gain exists
