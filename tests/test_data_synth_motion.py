@@ -173,10 +173,7 @@ def test_style_is_drawn_within_its_ranges(conversation):
 
 
 def test_style_shows_in_the_motion():
-    def pinned(**values):
-        return ConversationConfig(style=StyleRanges(**{k: (v, v) for k, v in values.items()}))
-
-    calm = pinned(
+    calm = pinned_style(
         gesture_radius_cm=6.0,
         hand_height_cm=2.0,
         speed=0.8,
@@ -184,7 +181,7 @@ def test_style_shows_in_the_motion():
         handedness=1.0,
         beat_amplitude_cm=7.0,
     )
-    lively = pinned(
+    lively = pinned_style(
         gesture_radius_cm=16.0,
         hand_height_cm=8.0,
         speed=1.25,
