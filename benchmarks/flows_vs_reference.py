@@ -20,9 +20,10 @@ reach.
 Usage:
     .venv/bin/python benchmarks/flows_vs_reference.py   # every density and model: 1.5-2 h, one core
     .venv/bin/python benchmarks/flows_vs_reference.py --densities two_moons --threads 1 &  # one
-    # density per process uses more cores (the README's table: --models RealNVP rotation)
+    # density per process uses more cores
     .venv/bin/python benchmarks/flows_vs_reference.py --densities two_moons --first-seed 4 &  # seeds
     # 4..7 in another process; each model's final NLL is also printed per seed, to pool the runs
+    # (the README's table pools 16 seeds: 4 seeds can miss a model's bad seeds, see its text)
     .venv/bin/python benchmarks/flows_vs_reference.py --checkpoints 100 300 --seeds 1  # smoke run
 """
 
