@@ -357,7 +357,7 @@ def glow(
         coupling: ``"affine"`` or ``"additive"``.
         lu: LU-decomposed (True) or plain (False) invertible linear layers.
         linear_init: ``"rotation"`` (random, Glow's choice and the default) or ``"reverse"``
-            (alternating halves, as RealNVP; a better start in 2D, see
+            (alternating halves, as RealNVP; how the two compare in 2D is in
             :mod:`gesturelib.flows.linear`).
         num_layers: hidden layers of each MLP, or stacked layers of each LSTM/GRU.
         clamp: bound of the affine log-scale (default 2.0, see :mod:`gesturelib.flows.coupling`).

@@ -21,9 +21,10 @@ log-determinant is zero:
   split into halves, consecutive couplings then alternate which half they transform, as the
   alternating masks of RealNVP. This matters in very few dimensions: in 2D a random rotation can
   leave two consecutive couplings transforming nearly the same direction, which wastes a step.
-  On eight Gaussians (``benchmarks/flows_vs_reference.py``, 16 seeds) the held-out NLL is
-  1.797 ± 0.009 nats from this start and 1.812 ± 0.026 from random rotations, whose worst seeds
-  reach 1.87.
+  Neither start wins everywhere in 2D (``benchmarks/flows_vs_reference.py``, held-out NLL over
+  16 seeds; the README has the whole table). On eight Gaussians this start gives
+  1.797 ± 0.009 nats against 1.812 ± 0.026 from random rotations, whose worst seeds reach 1.87.
+  On two moons it has bad seeds of its own (1.715 ± 0.020, worst 1.76).
 
 The inverse matrix is computed in float64 on every call and never cached, so it cannot go stale
 after an optimiser step.
