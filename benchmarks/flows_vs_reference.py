@@ -30,7 +30,6 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import inspect
 import statistics
 import time
 
@@ -57,8 +56,8 @@ def count_parameters(model: torch.nn.Module) -> int:
     return sum(p.numel() for p in model.parameters())
 
 
-def build_ours(steps: int, hidden: int, seed: int, linear_init: str, actnorm_rate: float):
-    flow = glow(2, steps, hidden, seed=seed, linear_init=linear_init, actnorm_rate=actnorm_rate)
+def build_ours(steps: int, hidden: int, seed: int, linear_init: str):
+    flow = glow(2, steps, hidden, seed=seed, linear_init=linear_init)
     return flow, flow.log_prob
 
 
@@ -132,12 +131,6 @@ def main() -> None:
         help="zuko's RealNVP, and ours with each initial linear layer",
     )
     parser.add_argument(
-        "--actnorm-rate",
-        type=float,
-        default=inspect.signature(glow).parameters["actnorm_rate"].default,
-        help="how fast our ActNorms learn (default: glow's)",
-    )
-    parser.add_argument(
         "--threads", type=int, default=None, help="torch threads (default: torch's)"
     )
     args = parser.parse_args()
@@ -153,7 +146,7 @@ def main() -> None:
     print(
         f"K={args.flow_steps} couplings, Adam (lr {args.lr} cosine-annealed to 0), batch {args.batch}, "
         f"{TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds {seeds[0]}..{seeds[-1]}, "
-        f"our ActNorm rate {args.actnorm_rate}, torch threads {torch.get_num_threads()}; held-out NLL in nats, mean ± sd over seeds\n"
+        f"torch threads {torch.get_num_threads()}; held-out NLL in nats, mean ± sd over seeds\n"
     )
     columns = "".join(f"{f'after {c} steps':>18}" for c in checkpoints)
     header = f"{'density':16} {'model':24} {'params':>7}{columns} {'train s':>8}"
@@ -169,9 +162,7 @@ def main() -> None:
         params = {}
         for seed in seeds:
             for key, linear_init in models.items():
-                ours = build_ours(
-                    args.flow_steps, args.hidden, seed, linear_init or "rotation", args.actnorm_rate
-                )
+                ours = build_ours(args.flow_steps, args.hidden, seed, linear_init or "rotation")
                 model, log_prob = (
                     build_zuko(args.flow_steps, count_parameters(ours[0]), seed)
                     if linear_init is None

@@ -15,12 +15,6 @@ Whether that initialisation has happened is stored in the buffer ``initialized``
 the ``state_dict``: a flow saved after training and loaded into a fresh module does *not*
 re-initialise from the next batch (a pitfall of reference implementations that keep the flag as a
 plain Python attribute).
-
-**How fast it learns** (``rate``). Adam moves every parameter by about its learning rate per step,
-whatever the size of the gradient. ``ActNorm(dim, rate=r)`` stores ``loc / r`` and
-``log_scale / r`` as its parameters, so under the same optimiser ``loc`` and ``log_scale`` move
-``r`` times as fast as an unscaled parameter would (Glow's ``logscale_factor`` is this, with 3).
-:func:`gesturelib.flows.glow` sets it for every step as ``actnorm_rate``.
 """
 
 from __future__ import annotations
@@ -41,33 +35,18 @@ class ActNorm(nn.Module):
         dim: number of features ``D``.
         eps: added to the standard deviation at initialisation, so a constant feature gives a
             large but finite scale.
-        rate: how fast ``loc`` and ``log_scale`` learn under Adam, relative to a plain parameter
-            (see the module docstring); they are stored divided by it.
     """
 
-    def __init__(self, dim: int, eps: float = 1e-6, rate: float = 1.0):
+    def __init__(self, dim: int, eps: float = 1e-6):
         super().__init__()
         if dim < 1:
             raise ValueError(f"dim must be a positive number of features, got {dim}")
-        if not rate > 0:
-            raise ValueError(f"rate must be positive, got {rate}")
         self.dim = dim
         self.eps = eps
-        self.rate = float(rate)
-        self.stored_loc = nn.Parameter(torch.zeros(dim))  # loc / rate
-        self.stored_log_scale = nn.Parameter(torch.zeros(dim))  # log_scale / rate
+        self.loc = nn.Parameter(torch.zeros(dim))
+        self.log_scale = nn.Parameter(torch.zeros(dim))
         # A buffer, not a Python bool, so that it is saved and restored with the state_dict.
         self.register_buffer("initialized", torch.tensor(False))
-
-    @property
-    def loc(self) -> torch.Tensor:
-        """The bias ``(D,)`` subtracted from each frame."""
-        return self.rate * self.stored_loc
-
-    @property
-    def log_scale(self) -> torch.Tensor:
-        """The log of the scale ``(D,)`` that multiplies each frame after ``loc`` is subtracted."""
-        return self.rate * self.stored_log_scale
 
     @torch.no_grad()
     def initialize(self, x: torch.Tensor) -> None:
@@ -85,8 +64,8 @@ class ActNorm(nn.Module):
                 f"which needs at least 2 samples (frames); got x of shape {tuple(x.shape)}"
             )
         std = frames.std(dim=0, unbiased=False)
-        self.stored_loc.copy_(frames.mean(dim=0) / self.rate)
-        self.stored_log_scale.copy_(-torch.log(std + self.eps) / self.rate)
+        self.loc.copy_(frames.mean(dim=0))
+        self.log_scale.copy_(-torch.log(std + self.eps))
         self.initialized.fill_(True)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -126,4 +105,4 @@ class ActNorm(nn.Module):
         return (per_frame * frames_per_sample(x)).expand(x.shape[0])
 
     def extra_repr(self) -> str:
-        return f"dim={self.dim}, rate={self.rate}, initialized={bool(self.initialized)}"
+        return f"dim={self.dim}, initialized={bool(self.initialized)}"

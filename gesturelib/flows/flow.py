@@ -68,7 +68,6 @@ class FlowStep(nn.Module):
         generator: torch generator for the linear layer's initial rotation.
         linear_init: ``"rotation"`` (random, default) or ``"reverse"``: the linear layer's initial
             matrix (see :mod:`gesturelib.flows.linear`).
-        actnorm_rate: how fast the ActNorm learns (see :mod:`gesturelib.flows.actnorm`).
     """
 
     def __init__(
@@ -84,7 +83,6 @@ class FlowStep(nn.Module):
         clamp: float | None = None,
         generator: torch.Generator | None = None,
         linear_init: str = "rotation",
-        actnorm_rate: float = 1.0,
     ):
         super().__init__()
         if coupling not in COUPLINGS:
@@ -94,7 +92,7 @@ class FlowStep(nn.Module):
                 f"clamp bounds the scale of an affine coupling; a {coupling} coupling has none"
             )
         options = {"clamp": clamp} if clamp is not None else {}
-        self.actnorm = ActNorm(dim, rate=actnorm_rate)
+        self.actnorm = ActNorm(dim)
         self.linear = InvertibleLinear(dim, lu=lu, generator=generator, init=linear_init)
         self.coupling = COUPLINGS[coupling](
             dim, cond_dim, hidden, conditioner, num_layers, **options
@@ -341,7 +339,6 @@ def glow(
     coupling: str = "affine",
     lu: bool = True,
     linear_init: str = "rotation",
-    actnorm_rate: float = 1.0,
     num_layers: int = 2,
     clamp: float | None = None,
     base: str = "normal",
@@ -362,8 +359,6 @@ def glow(
         linear_init: ``"rotation"`` (random, Glow's choice and the default) or ``"reverse"``
             (alternating halves, as RealNVP; how the two compare in 2D is in
             :mod:`gesturelib.flows.linear`).
-        actnorm_rate: how fast each step's ActNorm learns under Adam, relative to the other
-            parameters (see :mod:`gesturelib.flows.actnorm`).
         num_layers: hidden layers of each MLP, or stacked layers of each LSTM/GRU.
         clamp: bound of the affine log-scale (default 2.0, see :mod:`gesturelib.flows.coupling`).
         base: ``"normal"`` (N(0, I)) or ``"student_t"`` (multivariate Student's t, needs ``df``).
@@ -395,7 +390,6 @@ def glow(
                 num_layers=num_layers,
                 clamp=clamp,
                 linear_init=linear_init,
-                actnorm_rate=actnorm_rate,
             )
             for _ in range(steps)
         ]
