@@ -24,6 +24,7 @@ Usage:
     .venv/bin/python benchmarks/flows_vs_reference.py --densities two_moons --first-seed 4 &  # seeds
     # 4..7 in another process; each model's final NLL is also printed per seed, to pool the runs
     # (the README's table pools 16 seeds: 4 seeds can miss a model's bad seeds, see its text)
+    .venv/bin/python benchmarks/flows_vs_reference.py --grad-clip 5  # clip every model's gradient
     .venv/bin/python benchmarks/flows_vs_reference.py --checkpoints 100 300 --seeds 1  # smoke run
 """
 
@@ -77,9 +78,10 @@ def held_out_nll(log_prob, test_x) -> float:
     return -torch.cat([log_prob(chunk) for chunk in test_x.split(5000)]).mean().item()
 
 
-def train(model, log_prob, train_x, test_x, batch, checkpoints, lr, seed):
+def train(model, log_prob, train_x, test_x, batch, checkpoints, lr, seed, grad_clip=None):
     """Adam on the mean NLL of mini-batches drawn (seeded) from ``train_x``, the learning rate
-    annealed from ``lr`` to zero along a cosine over ``max(checkpoints)`` steps.
+    annealed from ``lr`` to zero along a cosine over ``max(checkpoints)`` steps, the gradient's
+    total norm clipped to ``grad_clip`` if given.
 
     Returns the held-out NLL at each checkpoint (a number of steps) and the training seconds.
     """
@@ -94,6 +96,8 @@ def train(model, log_prob, train_x, test_x, batch, checkpoints, lr, seed):
         loss = -log_prob(train_x[index]).mean()
         optimiser.zero_grad()
         loss.backward()
+        if grad_clip is not None:
+            torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
         optimiser.step()
         schedule.step()
         seconds += time.perf_counter() - start
@@ -116,6 +120,12 @@ def main() -> None:
     parser.add_argument("--hidden", type=int, default=64, help="our conditioner width")
     parser.add_argument("--batch", type=int, default=256)
     parser.add_argument("--lr", type=float, default=1e-3, help="initial learning rate")
+    parser.add_argument(
+        "--grad-clip",
+        type=float,
+        default=None,
+        help="clip every model's total gradient norm to this (default: no clipping)",
+    )
     parser.add_argument("--seeds", type=int, default=4, help="how many seeds")
     parser.add_argument(
         "--first-seed",
@@ -138,13 +148,16 @@ def main() -> None:
         torch.set_num_threads(args.threads)
     if args.seeds < 1:
         parser.error(f"--seeds must be at least 1, got {args.seeds}")
+    if args.grad_clip is not None and not args.grad_clip > 0:
+        parser.error(f"--grad-clip must be positive, got {args.grad_clip}")
     if args.first_seed < 0:
         parser.error(f"--first-seed must be non-negative, got {args.first_seed}")
     checkpoints = sorted(set(args.checkpoints))
     seeds = range(args.first_seed, args.first_seed + args.seeds)
 
     print(
-        f"K={args.flow_steps} couplings, Adam (lr {args.lr} cosine-annealed to 0), batch {args.batch}, "
+        f"K={args.flow_steps} couplings, Adam (lr {args.lr} cosine-annealed to 0), "
+        f"gradient norm clipped to {args.grad_clip}, batch {args.batch}, "
         f"{TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds {seeds[0]}..{seeds[-1]}, "
         f"torch threads {torch.get_num_threads()}; held-out NLL in nats, mean ± sd over seeds\n"
     )
@@ -170,7 +183,15 @@ def main() -> None:
                 )
                 params[key] = count_parameters(model)
                 nlls, spent = train(
-                    model, log_prob, train_x, test_x, args.batch, checkpoints, args.lr, seed
+                    model,
+                    log_prob,
+                    train_x,
+                    test_x,
+                    args.batch,
+                    checkpoints,
+                    args.lr,
+                    seed,
+                    args.grad_clip,
                 )
                 results[key].append(nlls)
                 seconds[key] += spent
