@@ -155,9 +155,14 @@ def main() -> None:
     checkpoints = sorted(set(args.checkpoints))
     seeds = range(args.first_seed, args.first_seed + args.seeds)
 
+    clipping = (
+        "no gradient clipping"
+        if args.grad_clip is None
+        else f"gradient norm clipped to {args.grad_clip}"
+    )
     print(
-        f"K={args.flow_steps} couplings, Adam (lr {args.lr} cosine-annealed to 0), "
-        f"gradient norm clipped to {args.grad_clip}, batch {args.batch}, "
+        f"K={args.flow_steps} couplings, Adam (lr {args.lr} cosine-annealed to 0), {clipping}, "
+        f"batch {args.batch}, "
         f"{TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds {seeds[0]}..{seeds[-1]}, "
         f"torch threads {torch.get_num_threads()}; held-out NLL in nats, mean ± sd over seeds\n"
     )

@@ -55,6 +55,31 @@ def test_flows_against_zuko_prints_a_row_per_model():
     assert len(per_seed) == 3 and all(re.search(r"3: \S+, 4: \S+$", row) for row in per_seed)
 
 
+def test_flows_against_zuko_clips_the_gradient_only_when_asked():
+    pytest.importorskip("zuko", reason="the comparison needs the [bench] extra")
+    tiny = ["--densities", "two_moons", "--checkpoints", "5", "--seeds", "1", "--flow-steps", "2"]
+    tiny += ["--hidden", "8", "--models", "reverse"]
+    plain, clipped = (
+        run("flows_vs_reference.py", *tiny),
+        run("flows_vs_reference.py", *tiny, "--grad-clip", "1e-3"),
+    )
+    assert "no gradient clipping" in plain.splitlines()[0]
+    assert "gradient norm clipped to 0.001" in clipped.splitlines()[0]
+
+    def final_nll(output: str) -> str:
+        row = next(row for row in output.splitlines() if "final NLL per seed" in row)
+        return row.split("0: ")[1]
+
+    assert final_nll(plain) != final_nll(clipped)
+    refused = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "flows_vs_reference.py"), "--grad-clip", "0"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert refused.returncode != 0 and "--grad-clip must be positive, got 0.0" in refused.stderr
+
+
 def test_flow_speed_benchmark_runs():
     output = run("bench_flows.py", "--repeats", "1", "--hidden", "8", "--frames", "4")
     rows = [row.split()[0] for row in output.splitlines()[3:]]
