@@ -162,8 +162,7 @@ def main() -> None:
     )
     print(
         f"K={args.flow_steps} couplings, Adam (lr {args.lr} cosine-annealed to 0), {clipping}, "
-        f"batch {args.batch}, "
-        f"{TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds {seeds[0]}..{seeds[-1]}, "
+        f"batch {args.batch}, {TRAIN_SIZE} training / {TEST_SIZE} held-out points, seeds {seeds[0]}..{seeds[-1]}, "
         f"torch threads {torch.get_num_threads()}; held-out NLL in nats, mean ± sd over seeds\n"
     )
     columns = "".join(f"{f'after {c} steps':>18}" for c in checkpoints)

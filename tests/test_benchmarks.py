@@ -12,13 +12,18 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-def run(script: str, *arguments: str) -> str:
-    result = subprocess.run(
+def launch(script: str, *arguments: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
         [sys.executable, str(BENCHMARKS / script), *arguments],
         capture_output=True,
         text=True,
         timeout=120,
     )
+
+
+def run(script: str, *arguments: str) -> str:
+    """The standard output of a run that must succeed."""
+    result = launch(script, *arguments)
     assert result.returncode == 0, result.stderr
     return result.stdout
 
@@ -71,12 +76,7 @@ def test_flows_against_zuko_clips_the_gradient_only_when_asked():
         return row.split("0: ")[1]
 
     assert final_nll(plain) != final_nll(clipped)
-    refused = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "flows_vs_reference.py"), "--grad-clip", "0"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    refused = launch("flows_vs_reference.py", "--grad-clip", "0")
     assert refused.returncode != 0 and "--grad-clip must be positive, got 0.0" in refused.stderr
 
 
