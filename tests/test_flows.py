@@ -59,6 +59,7 @@ def call(module, x, cond, inverse=False):
 BIJECTIONS = {
     "actnorm": (lambda: ActNorm(DIM), False, False),
     "actnorm_sequence": (lambda: ActNorm(DIM), True, False),
+    "actnorm_uncentred": (lambda: ActNorm(DIM, centre=False), False, False),
     "linear_lu": (lambda: InvertibleLinear(DIM, lu=True), False, False),
     "linear_plain": (lambda: InvertibleLinear(DIM, lu=False), True, False),
     "linear_lu_reverse": (lambda: InvertibleLinear(DIM, init="reverse"), True, False),
@@ -157,10 +158,26 @@ def test_actnorm_state_survives_save_and_load():
     torch.testing.assert_close(fresh.loc, trained.loc)  # not re-initialised from other_batch
 
 
+@pytest.mark.parametrize("shape", [(256, 3), (16, 20, 3)])
+def test_uncentred_actnorm_scales_its_first_batch_to_unit_rms_and_keeps_its_offsets(shape):
+    x = 5.0 + 3.0 * torch.randn(*shape, generator=torch.Generator().manual_seed(0))
+    x[..., 1] *= 0.01
+    actnorm = ActNorm(3, centre=False)
+    y, _ = actnorm(x)
+    assert not actnorm.loc.any()
+    frames, x_frames = y.reshape(-1, 3), x.reshape(-1, 3)
+    torch.testing.assert_close(frames.square().mean(0), torch.ones(3), rtol=1e-4, atol=1e-5)
+    # A pure rescaling: each feature's mean-to-spread ratio is what it was.
+    torch.testing.assert_close(
+        frames.mean(0) / frames.std(0), x_frames.mean(0) / x_frames.std(0), rtol=1e-4, atol=1e-5
+    )
+    assert "centre=False" in repr(actnorm)
+
+
 @pytest.mark.parametrize("scale", [0.01, 1.0, 100.0])
-def test_mlp_conditioner_hidden_units_start_standardised_whatever_the_input_scale(scale):
+def test_mlp_conditioner_hidden_units_start_at_unit_scale_whatever_the_input_scale(scale):
     # With a zero-initialised last layer, the hidden features are what a coupling learns from
-    # first: each must start at zero mean and unit variance before its ReLU.
+    # first: each must start at unit mean square before its ReLU.
     conditioner = MLPConditioner(3, 4, hidden=32, num_layers=2)
     inputs = scale * (1.0 + torch.randn(20, 6, 3, generator=torch.Generator().manual_seed(0)))
     pre_activations = []
@@ -171,9 +188,22 @@ def test_mlp_conditioner_hidden_units_start_standardised_whatever_the_input_scal
     assert outputs.shape == (20, 6, 4) and not outputs.any()  # zero last layer
     assert len(pre_activations) == 2
     for hidden in pre_activations:
-        units = hidden.reshape(-1, 32)
-        torch.testing.assert_close(units.mean(0), torch.zeros(32), atol=1e-4, rtol=0)
-        torch.testing.assert_close(units.var(0, unbiased=False), torch.ones(32), atol=5e-3, rtol=0)
+        mean_square = hidden.reshape(-1, 32).square().mean(0)
+        torch.testing.assert_close(mean_square, torch.ones(32), rtol=0, atol=1e-3)
+
+
+def test_mlp_conditioner_first_layer_units_switch_at_different_points_of_a_single_input():
+    # A 2D flow's coupling conditions on one coordinate. If the hidden ActNorm centred its units,
+    # every first-layer ReLU would switch at the mean of the first batch and the 64 units would
+    # span two features, relu(x - m) and relu(m - x); uncentred, they switch where their random
+    # initialisation put them and span many.
+    torch.manual_seed(0)
+    conditioner = MLPConditioner(1, 2, hidden=64, num_layers=2)
+    conditioner(torch.randn(256, 1, generator=torch.Generator().manual_seed(1)))  # initialises
+    line = torch.linspace(-3.0, 3.0, 601)[:, None]
+    with torch.no_grad():
+        first_layer_features = conditioner.hidden_layers[:3](line)
+    assert torch.linalg.matrix_rank(first_layer_features) >= 16
 
 
 def test_zero_linear_starts_at_zero_and_scales_its_outputs_by_the_learned_gain():

@@ -33,16 +33,22 @@ class ActNorm(nn.Module):
 
     Args:
         dim: number of features ``D``.
-        eps: added to the standard deviation at initialisation, so a constant feature gives a
-            large but finite scale.
+        eps: added to the standard deviation (root mean square) at initialisation, so a
+            constant feature gives a large but finite scale.
+        centre: whether initialisation also centres each feature (``loc`` = batch mean). With
+            ``centre=False`` ``loc`` starts at zero and ``exp(-log_scale)`` is the root mean
+            square of the feature, so the batch comes out with unit mean square but keeps its
+            offsets: the choice inside a conditioner, where centring would put every hidden
+            unit's ReLU threshold at the same point (see ``conditioners.HiddenActNorm``).
     """
 
-    def __init__(self, dim: int, eps: float = 1e-6):
+    def __init__(self, dim: int, eps: float = 1e-6, centre: bool = True):
         super().__init__()
         if dim < 1:
             raise ValueError(f"dim must be a positive number of features, got {dim}")
         self.dim = dim
         self.eps = eps
+        self.centre = centre
         self.loc = nn.Parameter(torch.zeros(dim))
         self.log_scale = nn.Parameter(torch.zeros(dim))
         # A buffer, not a Python bool, so that it is saved and restored with the state_dict.
@@ -50,7 +56,8 @@ class ActNorm(nn.Module):
 
     @torch.no_grad()
     def initialize(self, x: torch.Tensor) -> None:
-        """Set ``loc`` and ``log_scale`` so that ``x`` maps to zero mean, unit variance per feature.
+        """Set ``loc`` and ``log_scale`` so that ``x`` maps to zero mean, unit variance per feature
+        (with ``centre=False``: ``loc`` zero and unit mean square per feature).
 
         Args:
             x: ``(B, D)`` or ``(B, T, D)``; statistics are taken over all ``B * T`` frames, which
@@ -63,9 +70,13 @@ class ActNorm(nn.Module):
                 "ActNorm initialises its scale from the standard deviation of the first batch, "
                 f"which needs at least 2 samples (frames); got x of shape {tuple(x.shape)}"
             )
-        std = frames.std(dim=0, unbiased=False)
-        self.loc.copy_(frames.mean(dim=0))
-        self.log_scale.copy_(-torch.log(std + self.eps))
+        if self.centre:
+            spread = frames.std(dim=0, unbiased=False)
+            self.loc.copy_(frames.mean(dim=0))
+        else:
+            spread = frames.square().mean(dim=0).sqrt()
+            self.loc.zero_()
+        self.log_scale.copy_(-torch.log(spread + self.eps))
         self.initialized.fill_(True)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -105,4 +116,5 @@ class ActNorm(nn.Module):
         return (per_frame * frames_per_sample(x)).expand(x.shape[0])
 
     def extra_repr(self) -> str:
-        return f"dim={self.dim}, initialized={bool(self.initialized)}"
+        centre = "" if self.centre else ", centre=False"
+        return f"dim={self.dim}{centre}, initialized={bool(self.initialized)}"

@@ -99,13 +99,20 @@ def _check_sizes(in_features: int, out_features: int, hidden: int, num_layers: i
 class HiddenActNorm(nn.Module):
     """:class:`ActNorm` used as a normalisation layer inside a network: ``(..., H)`` -> same.
 
-    Initialised from the first batch it sees (zero mean, unit variance per unit), then a learned
-    per-unit affine map. Inside a conditioner its log-determinant is irrelevant and dropped.
+    Initialised from the first batch it sees so that every unit has unit mean square, then a
+    learned per-unit affine map. Inside a conditioner its log-determinant is irrelevant and
+    dropped.
+
+    It scales but does not centre (``ActNorm(centre=False)``). Centring would move every unit's
+    ReLU threshold to the mean of the first batch: in a 2D flow a coupling's conditioner sees a
+    single coordinate, so all its first-layer units would switch at the same point and span only
+    two features, ``relu(x - m)`` and ``relu(m - x)``, until training pulls them apart. Without
+    centring each unit keeps the threshold of its random initialisation.
     """
 
     def __init__(self, features: int):
         super().__init__()
-        self.actnorm = ActNorm(features)
+        self.actnorm = ActNorm(features, centre=False)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.actnorm.normalise(x)  # no checks or log-determinant on this hot path
