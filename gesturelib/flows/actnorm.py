@@ -9,7 +9,8 @@ which is invertible, batch-independent after training, and has a log-determinant
 depend on ``x``. Its parameters are set from the data once: on the first call of :meth:`forward`
 ``loc`` becomes the batch mean and ``exp(-log_scale)`` the batch standard deviation of each
 feature, so every step of a fresh flow sees standardised inputs, which makes deep flows train
-from the first step.
+from the first step. With ``centre=False`` it only scales (``loc`` stays zero, ``exp(-log_scale)``
+is the root mean square), the variant used inside conditioner networks.
 
 Whether that initialisation has happened is stored in the buffer ``initialized``, so it is part of
 the ``state_dict``: a flow saved after training and loaded into a fresh module does *not*
@@ -67,8 +68,9 @@ class ActNorm(nn.Module):
         frames = x.reshape(-1, self.dim)
         if frames.shape[0] < 2:
             raise ValueError(
-                "ActNorm initialises its scale from the standard deviation of the first batch, "
-                f"which needs at least 2 samples (frames); got x of shape {tuple(x.shape)}"
+                "ActNorm initialises its scale from the spread of the first batch (its standard "
+                "deviation, or root mean square with centre=False), which needs at least 2 "
+                f"samples (frames); got x of shape {tuple(x.shape)}"
             )
         if self.centre:
             spread = frames.std(dim=0, unbiased=False)

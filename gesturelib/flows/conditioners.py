@@ -24,8 +24,8 @@ the held-out NLL of the 2D toy flows of ``benchmarks/flows_vs_reference.py`` aft
 * A coupling first learns by reweighting the hidden features it starts with, so their scale
   matters. The MLP therefore puts an ActNorm after each hidden linear layer, initialised from the
   first batch so that every hidden unit starts at a common scale before its ReLU, whatever the
-  scale of the inputs. Eight Gaussians: 1.842 ± 0.009 without it, 1.809 ± 0.012 with it (then a
-  centring one, see the last point).
+  scale of the inputs. Eight Gaussians: 1.842 ± 0.009 without it, 1.809 ± 0.012 with it (measured
+  with the earlier, centring version; see the last point).
 * The zero layer learns a gain per output (:class:`ZeroLinear`), which lets the size of each
   output be learned on a log scale. Eight Gaussians: 1.809 ± 0.012 -> 1.795 ± 0.012; on two moons
   (1.708 -> 1.703) and the checkerboard (2.221 -> 2.216) the gain is within the seeds' spread.
