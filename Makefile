@@ -12,7 +12,7 @@ TORCH_VERSION := $(shell sed -n 's/^torch==//p' requirements-lock.txt)
 STAMP := $(VENV)/.installed
 OUT ?= outputs/demo
 
-.PHONY: setup demo test lab lint benchmark lock clean
+.PHONY: setup demo test check-full lab lint benchmark lock clean
 
 setup: $(STAMP)
 
@@ -35,6 +35,12 @@ test: setup
 	$(BIN)/ruff format --check .
 	GESTURELIB_QUICK=1 MPLBACKEND=Agg $(BIN)/python -m pytest tests notebooks \
 		--nbval-lax --nbval-current-env --nbval-cell-timeout=300
+
+## make check-full: every notebook executed in full mode, its claims asserted (NB=04 for one);
+## the executed copies, with their pictures, go to outputs/check-full/. Not part of CI (minutes).
+NB ?=
+check-full: setup
+	$(BIN)/python tools/check_full.py $(NB)
 
 ## make lab: open JupyterLab on the notebooks
 lab: setup
