@@ -1,7 +1,8 @@
-"""Run-time switches shared by notebooks, the command line and CI: quick mode and seeding.
+"""Run-time switches shared by notebooks, the command line and CI: quick mode, seeds, devices.
 
 Quick mode is one environment variable, ``GESTURELIB_QUICK``; CI sets it to 1 so that every
-notebook runs on less data and fewer training steps, through the same code path.
+notebook runs on less data and fewer training steps, through the same code path. Random draws
+take explicit generators (:func:`standard_normal`), and devices are named once (:func:`device`).
 """
 
 from __future__ import annotations
@@ -45,3 +46,40 @@ def seed_everything(seed: int) -> tuple[np.random.Generator, torch.Generator]:
     np.random.seed(seed)  # noqa: NPY002 - third-party code may draw from NumPy's global generator
     torch.manual_seed(seed)
     return np.random.default_rng(seed), torch.Generator().manual_seed(seed)
+
+
+def standard_normal(
+    shape: tuple[int, ...],
+    generator: torch.Generator | None = None,
+    device=None,
+    dtype: torch.dtype | None = None,
+) -> torch.Tensor:
+    """``N(0, I)`` noise of ``shape`` from ``generator``, on ``device`` in ``dtype``.
+
+    Drawn on the generator's own device, then moved, so that a CPU generator (the usual seeded
+    one) drives a model on a GPU and gives the same numbers there.
+    """
+    source = generator.device if generator is not None else device
+    noise = torch.randn(shape, generator=generator, device=source, dtype=dtype)
+    return noise.to(device) if device is not None else noise
+
+
+def device(name: str | torch.device) -> torch.device:
+    """The device called ``name`` (``"cpu"``, ``"cuda"``, ``"cuda:1"``), checked to exist here.
+
+    Raises:
+        ValueError: for a name that is no device, or CUDA on a machine without a CUDA GPU.
+    """
+    try:
+        found = torch.device(name)
+    except (RuntimeError, TypeError) as error:
+        raise ValueError(f"{name!r} is not a device; use e.g. 'cpu' or 'cuda'") from error
+    if found.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {name!r} asked for, but no CUDA GPU is available here")
+    return found
+
+
+def device_of(module: torch.nn.Module) -> torch.device:
+    """Where a module's parameters live (the CPU for a module without parameters)."""
+    parameter = next(module.parameters(), None)
+    return torch.device("cpu") if parameter is None else parameter.device

@@ -22,27 +22,30 @@ from gesturelib.flows import (
     FlowStep,
     InvertibleLinear,
     MLPConditioner,
+    RecurrentConditioner,
+    RecurrentCoupling,
+    RecurrentFlowStep,
     StandardNormal,
     StudentT,
+    UninitialisedFlowError,
     ZeroLinear,
     glow,
-    make_conditioner,
+    recurrent_glow,
 )
-from gesturelib.flows.base import sample_standard_gamma
 
 DIM, COND, BATCH, FRAMES = 4, 3, 5, 3
 
 
 def randomise(module: torch.nn.Module, seed: int = 0, scale: float = 0.3) -> torch.nn.Module:
-    """Perturb every parameter and mark every ActNorm initialised."""
+    """Perturb every parameter and mark every data-initialised layer initialised."""
     generator = torch.Generator().manual_seed(seed)
     with torch.no_grad():
         for parameter in module.parameters():
             noise = torch.randn(parameter.shape, generator=generator, dtype=parameter.dtype)
             parameter.add_(scale * noise)
-        for sub in module.modules():
-            if isinstance(sub, ActNorm):
-                sub.initialized.fill_(True)
+        for name, buffer in module.named_buffers():
+            if name.endswith("initialized"):
+                buffer.fill_(True)
     return module
 
 
@@ -59,33 +62,32 @@ def call(module, x, cond, inverse=False):
 BIJECTIONS = {
     "actnorm": (lambda: ActNorm(DIM), False, False),
     "actnorm_sequence": (lambda: ActNorm(DIM), True, False),
-    "actnorm_uncentred": (lambda: ActNorm(DIM, centre=False), False, False),
     "linear_lu": (lambda: InvertibleLinear(DIM, lu=True), False, False),
     "linear_plain": (lambda: InvertibleLinear(DIM, lu=False), True, False),
     "linear_lu_reverse": (lambda: InvertibleLinear(DIM, init="reverse"), True, False),
-    "affine_mlp": (lambda: AffineCoupling(DIM, COND, hidden=8), False, True),
-    "affine_mlp_sequence": (lambda: AffineCoupling(DIM, COND, hidden=8), True, True),
-    "affine_lstm": (lambda: AffineCoupling(DIM, COND, 8, "lstm"), True, True),
-    "affine_gru": (lambda: AffineCoupling(DIM + 1, 0, 8, "gru"), True, False),
-    "additive_mlp": (lambda: AdditiveCoupling(DIM + 1, COND, hidden=8), False, True),
-    "additive_lstm": (lambda: AdditiveCoupling(DIM, 0, 8, "lstm"), True, False),
-    "additive_gru": (lambda: AdditiveCoupling(DIM, COND, 8, "gru"), True, True),
-    "step_mlp": (lambda: FlowStep(DIM, COND, 8), False, True),
-    "step_lstm": (lambda: FlowStep(DIM, COND, 8, "lstm", lu=False), True, True),
-    "flow_mlp": (lambda: glow(DIM, 3, 8, cond_dim=COND), False, True),
-    "flow_gru_additive": (lambda: glow(DIM, 2, 8, COND, "gru", coupling="additive"), True, True),
-    "flow_lstm_student": (
-        lambda: glow(DIM, 2, 8, COND, "lstm", base="student_t", df=3),
+    "affine": (lambda: AffineCoupling(DIM, COND, hidden=8), False, True),
+    "affine_sequence": (lambda: AffineCoupling(DIM, COND, hidden=8), True, True),
+    "additive": (lambda: AdditiveCoupling(DIM + 1, COND, hidden=8), False, True),
+    "recurrent_lstm": (lambda: RecurrentCoupling(DIM, COND, 8), True, True),
+    "recurrent_gru": (lambda: RecurrentCoupling(DIM + 1, 0, 8, cell="gru"), True, False),
+    "recurrent_additive": (lambda: RecurrentCoupling(DIM, 0, 8, additive=True), True, False),
+    "step": (lambda: FlowStep(DIM, COND, 8), False, True),
+    "recurrent_step": (lambda: RecurrentFlowStep(DIM, COND, 8, num_layers=2), True, True),
+    "flow": (lambda: glow(DIM, 3, 8, cond_dim=COND), False, True),
+    "flow_additive_2d": (lambda: glow(2, 3, 8, coupling="additive"), False, False),
+    "recurrent_flow_gru": (
+        lambda: recurrent_glow(DIM, 2, 8, COND, cell="gru", coupling="additive"),
         True,
         True,
     ),
+    "recurrent_flow_student": (lambda: recurrent_glow(DIM, 2, 8, COND, df=3), True, True),
 }
 
 
 def make_case(name, dtype=torch.float64, seed=0):
     factory, sequence, conditional = BIJECTIONS[name]
     module = randomise(factory().to(dtype), seed)
-    dim = module.dim
+    dim = module.dim if hasattr(module, "dim") else module.coupling.dim
     generator = torch.Generator().manual_seed(seed + 1)
     lead = (BATCH, FRAMES) if sequence else (BATCH,)
     x = torch.randn(*lead, dim, generator=generator, dtype=dtype)
@@ -121,11 +123,19 @@ def test_logdet_matches_autograd_jacobian(name, inverse):
         torch.testing.assert_close(torch.linalg.slogdet(jac)[1], logdet[b], atol=1e-9, rtol=1e-9)
 
 
-@pytest.mark.parametrize("coupling", [AffineCoupling, AdditiveCoupling])
-@pytest.mark.parametrize("conditioner", ["mlp", "lstm", "gru"])
-def test_a_new_coupling_is_the_identity(coupling, conditioner):
+@pytest.mark.parametrize(
+    "coupling",
+    [
+        AffineCoupling(DIM, COND, 8),
+        AdditiveCoupling(DIM, COND, 8),
+        RecurrentCoupling(DIM, COND, 8),
+        RecurrentCoupling(DIM, COND, 8, cell="gru", additive=True),
+    ],
+    ids=["affine", "additive", "lstm", "gru_additive"],
+)
+def test_a_new_coupling_is_the_identity(coupling):
     x, cond = torch.randn(BATCH, FRAMES, DIM), torch.randn(BATCH, FRAMES, COND)
-    y, logdet = coupling(DIM, COND, 8, conditioner)(x, cond)[:2]
+    y, logdet = coupling(x, cond)[:2]
     torch.testing.assert_close(y, x, atol=0, rtol=0)
     torch.testing.assert_close(logdet, torch.zeros(BATCH), atol=0, rtol=0)
 
@@ -158,20 +168,16 @@ def test_actnorm_state_survives_save_and_load():
     torch.testing.assert_close(fresh.loc, trained.loc)  # not re-initialised from other_batch
 
 
-@pytest.mark.parametrize("shape", [(256, 3), (16, 20, 3)])
-def test_uncentred_actnorm_scales_its_first_batch_to_unit_rms_and_keeps_its_offsets(shape):
-    x = 5.0 + 3.0 * torch.randn(*shape, generator=torch.Generator().manual_seed(0))
-    x[..., 1] *= 0.01
-    actnorm = ActNorm(3, centre=False)
-    y, _ = actnorm(x)
-    assert not actnorm.loc.any()
-    frames, x_frames = y.reshape(-1, 3), x.reshape(-1, 3)
-    torch.testing.assert_close(frames.square().mean(0), torch.ones(3), rtol=1e-4, atol=1e-5)
-    # A pure rescaling: each feature's mean-to-spread ratio is what it was.
-    torch.testing.assert_close(
-        frames.mean(0) / frames.std(0), x_frames.mean(0) / x_frames.std(0), rtol=1e-4, atol=1e-5
-    )
-    assert "centre=False" in repr(actnorm)
+def test_actnorm_refuses_to_initialise_from_a_useless_batch():
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        ActNorm(3)(torch.randn(1, 3))
+    bad = torch.randn(8, 3)
+    bad[2, 1] = float("nan")
+    with pytest.raises(ValueError, match="NaN"):
+        ActNorm(3)(bad)
+
+
+# ------------------------------------------------------------------------------ conditioners
 
 
 @pytest.mark.parametrize("scale", [0.01, 1.0, 100.0])
@@ -182,27 +188,28 @@ def test_mlp_conditioner_hidden_units_start_at_unit_scale_whatever_the_input_sca
     inputs = scale * (1.0 + torch.randn(20, 6, 3, generator=torch.Generator().manual_seed(0)))
     pre_activations = []
     for layer in conditioner.hidden_layers:
-        if isinstance(layer, torch.nn.ReLU):
-            layer.register_forward_hook(lambda _, args, __: pre_activations.append(args[0]))
-    outputs, _ = conditioner(inputs)
+        layer.register_forward_hook(lambda _, __, output: pre_activations.append(output))
+    outputs = conditioner(inputs)
     assert outputs.shape == (20, 6, 4) and not outputs.any()  # zero last layer
-    assert len(pre_activations) == 2
-    for hidden in pre_activations:
+    for hidden in pre_activations[-2:]:  # the forward pass after initialisation
         mean_square = hidden.reshape(-1, 32).square().mean(0)
         torch.testing.assert_close(mean_square, torch.ones(32), rtol=0, atol=1e-3)
+    weights = conditioner.hidden_layers[0].weight.clone()
+    conditioner(inputs + 5.0)  # a later batch does not rescale again
+    assert torch.equal(conditioner.hidden_layers[0].weight, weights)
 
 
 def test_mlp_conditioner_first_layer_units_switch_at_different_points_of_a_single_input():
-    # A 2D flow's coupling conditions on one coordinate. If the hidden ActNorm centred its units,
-    # every first-layer ReLU would switch at the mean of the first batch and the 64 units would
-    # span two features, relu(x - m) and relu(m - x); uncentred, they switch where their random
-    # initialisation put them and span many.
+    # A 2D flow's coupling conditions on one coordinate. Had the first batch centred every unit,
+    # every first-layer ReLU would switch at its mean and the 64 units would span two features,
+    # relu(x - m) and relu(m - x); scaled only, they switch where their random initialisation put
+    # them and span many.
     torch.manual_seed(0)
     conditioner = MLPConditioner(1, 2, hidden=64, num_layers=2)
     conditioner(torch.randn(256, 1, generator=torch.Generator().manual_seed(1)))  # initialises
     line = torch.linspace(-3.0, 3.0, 601)[:, None]
     with torch.no_grad():
-        first_layer_features = conditioner.hidden_layers[:3](line)
+        first_layer_features = torch.relu(conditioner.hidden_layers[0](line))
     assert torch.linalg.matrix_rank(first_layer_features) >= 16
 
 
@@ -220,9 +227,19 @@ def test_zero_linear_starts_at_zero_and_scales_its_outputs_by_the_learned_gain()
     assert not any(parameter.any() for parameter in layer.parameters())
 
 
-@pytest.mark.parametrize("conditioner", ["mlp", "lstm", "gru"])
-def test_every_conditioner_ends_in_a_zero_linear_layer(conditioner):
-    assert isinstance(make_conditioner(conditioner, 3, 4).output, ZeroLinear)
+@pytest.mark.parametrize("cell", ["lstm", "gru"])
+@pytest.mark.parametrize("num_layers", [1, 2])
+def test_recurrent_conditioner_steps_frames_with_its_cells_as_the_sequence_pass(cell, num_layers):
+    conditioner = randomise(RecurrentConditioner(5, 4, 8, cell, num_layers).double())
+    inputs = torch.randn(3, 6, 5, dtype=torch.float64)
+    outputs, final = conditioner(inputs)
+    state, steps = None, []
+    for t in range(6):
+        output, state = conditioner(inputs[:, t : t + 1], state)
+        steps.append(output)
+    torch.testing.assert_close(torch.cat(steps, dim=1), outputs)
+    torch.testing.assert_close(state, final)
+    assert isinstance(conditioner.output, ZeroLinear)
 
 
 def test_whole_flow_state_survives_save_and_load():
@@ -259,10 +276,14 @@ def test_linear_reverse_init_reverses_the_features(lu):
     y, logdet = layer(x)
     torch.testing.assert_close(y, x.flip(-1))
     torch.testing.assert_close(logdet, torch.zeros(3))
-    flow = glow(2, 2, 8, linear_init="reverse")
-    torch.testing.assert_close(
-        flow.steps[1].linear.weight_matrix(), torch.tensor([[0.0, 1], [1, 0]])
-    )
+
+
+def test_glow_starts_with_swaps_in_two_dimensions_and_rotations_otherwise():
+    swap = torch.tensor([[0.0, 1], [1, 0]])
+    torch.testing.assert_close(glow(2, 2, 8).steps[1].linear.weight_matrix(), swap)
+    rotation = glow(3, 2, 8).steps[0].linear.weight_matrix().detach()
+    assert rotation.abs().lt(0.99).any()  # not a permutation
+    assert glow(2, 2, 8, linear_init="rotation").steps[0].linear.init == "rotation"
 
 
 @pytest.mark.parametrize("lu", [True, False])
@@ -280,6 +301,16 @@ def test_linear_inverse_follows_the_parameters_after_an_optimiser_step(lu):
         torch.testing.assert_close(layer.inverse(layer(x)[0])[0], x)
     assert (weights[-1] - weights[0]).abs().max() > 0.1  # the steps did change W
     assert (layer.weight_matrix() @ layer.inverse_matrix() - torch.eye(5)).abs().max() < 1e-12
+
+
+def test_fixed_weights_computes_each_inverse_once_and_forgets_it_after():
+    flow = randomise(glow(DIM, 3, 8).double())
+    z = torch.randn(6, DIM, dtype=torch.float64)
+    expected = flow.inverse(z)[0]
+    with flow.fixed_weights():
+        assert all(step.linear.fixed_inverse is not None for step in flow.steps)
+        torch.testing.assert_close(flow.inverse(z)[0], expected)
+    assert all(step.linear.fixed_inverse is None for step in flow.steps)
 
 
 # ------------------------------------------------------------------------------- densities
@@ -319,10 +350,14 @@ def test_student_t_samples_follow_the_distribution(df):
     assert scipy.stats.kstest(statistic, scipy.stats.f(3, df).cdf).pvalue > 1e-3
 
 
-@pytest.mark.parametrize("concentration", [0.3, 2.5])
-def test_gamma_sampler_follows_the_distribution(concentration):
-    draws = sample_standard_gamma(concentration, (20000,), torch.Generator().manual_seed(1))
-    assert scipy.stats.kstest(draws.numpy(), scipy.stats.gamma(concentration).cdf).pvalue > 1e-3
+def test_student_t_samples_come_from_the_generator_alone():
+    torch.manual_seed(5)
+    before = torch.get_rng_state()
+    first = StudentT(3, 4.0).sample((50,), generator=torch.Generator().manual_seed(1))
+    assert torch.equal(torch.get_rng_state(), before)  # the global stream is left alone
+    torch.manual_seed(6)
+    again = StudentT(3, 4.0).sample((50,), generator=torch.Generator().manual_seed(1))
+    assert torch.equal(first, again)
 
 
 def test_normal_base_log_prob():
@@ -334,18 +369,17 @@ def test_normal_base_log_prob():
 # ----------------------------------------------------------------------------- training use
 
 
-@pytest.mark.parametrize("conditioner", ["mlp", "lstm", "gru"])
-def test_every_parameter_receives_a_gradient(conditioner):
-    sequence = conditioner != "mlp"
-    shape = (4, 6, DIM) if sequence else (16, DIM)
+@pytest.mark.parametrize("recurrent", [False, True])
+def test_every_parameter_receives_a_gradient(recurrent):
+    shape = (4, 6, DIM) if recurrent else (16, DIM)
     x, cond = torch.randn(*shape), torch.randn(*shape[:-1], COND)
     for randomised in (False, True):
-        flow = glow(DIM, 3, 8, COND, conditioner)
+        flow = recurrent_glow(DIM, 3, 8, COND) if recurrent else glow(DIM, 3, 8, COND)
         flow(x, cond)  # initialise ActNorm from data, as training does
         if randomised:
             randomise(flow)
         log_prob = flow.log_prob(x, cond)
-        (-(log_prob[0] if sequence else log_prob).mean()).backward()
+        (-(log_prob[0] if recurrent else log_prob).mean()).backward()
         for name, parameter in flow.named_parameters():
             assert parameter.grad is not None, name
             assert torch.isfinite(parameter.grad).all(), name
@@ -353,9 +387,9 @@ def test_every_parameter_receives_a_gradient(conditioner):
                 assert parameter.grad.abs().max() > 0, name
 
 
-@pytest.mark.parametrize("conditioner", ["lstm", "gru"])
-def test_sequence_mode_equals_frame_by_frame(conditioner):
-    flow = randomise(glow(DIM, 3, 8, COND, conditioner, num_layers=2).double())
+@pytest.mark.parametrize("cell", ["lstm", "gru"])
+def test_sequence_mode_equals_frame_by_frame(cell):
+    flow = randomise(recurrent_glow(DIM, 3, 8, COND, cell=cell, num_layers=2).double())
     x = torch.randn(2, 7, DIM, dtype=torch.float64)
     cond = torch.randn(2, 7, COND, dtype=torch.float64)
     z, logdet, final_state = flow(x, cond)
@@ -371,26 +405,22 @@ def test_sequence_mode_equals_frame_by_frame(conditioner):
 
     # Sampling frame by frame (noise -> data) walks through the same states.
     state, frames = flow.initial_state(2, dtype=torch.float64), []
-    for t in range(7):
-        x_t, _, state = flow.inverse(z[:, t : t + 1], cond[:, t : t + 1], state)
-        frames.append(x_t)
+    with flow.fixed_weights():
+        for t in range(7):
+            x_t, _, state = flow.inverse(z[:, t : t + 1], cond[:, t : t + 1], state)
+            frames.append(x_t)
     torch.testing.assert_close(torch.cat(frames, dim=1), x)
     torch.testing.assert_close(state, final_state)
     log_prob, _ = flow.log_prob(x, cond)
-    expected = flow.base.log_prob(z).sum(1) + logdet
-    torch.testing.assert_close(log_prob, expected)
+    torch.testing.assert_close(log_prob, flow.base.log_prob(z).sum(1) + logdet)
 
 
-@pytest.mark.parametrize(
-    "conditioner, base, lead", [("mlp", "normal", (6,)), ("lstm", "student_t", (3, 4))]
-)
-def test_temperature_zero_returns_the_mode_and_temperature_scales_the_noise(
-    conditioner, base, lead
-):
-    df = 3.0 if base == "student_t" else None
-    flow = randomise(glow(DIM, 3, 8, COND, conditioner, base=base, df=df))
+@pytest.mark.parametrize("recurrent, df", [(False, None), (True, 3.0)])
+def test_temperature_zero_returns_the_mode_and_temperature_scales_the_noise(recurrent, df):
+    build = recurrent_glow if recurrent else glow
+    flow = randomise(build(DIM, 3, 8, COND, df=df))
+    lead = (3, 4) if recurrent else (6,)
     cond = torch.randn(*lead, COND)
-    recurrent = conditioner != "mlp"
 
     def sample(**kwargs):
         out = flow.sample(cond=cond, **kwargs)
@@ -404,10 +434,10 @@ def test_temperature_zero_returns_the_mode_and_temperature_scales_the_noise(
     torch.testing.assert_close(warm, flow.inverse(0.5 * z, cond)[0])
 
 
-@pytest.mark.parametrize("conditioner", ["mlp", "gru"])
-def test_large_inputs_give_finite_outputs(conditioner):
-    flow = glow(DIM, 4, 16, COND, conditioner)
-    lead = (8, 5) if conditioner == "gru" else (64,)
+@pytest.mark.parametrize("recurrent", [False, True])
+def test_large_inputs_give_finite_outputs(recurrent):
+    flow = recurrent_glow(DIM, 4, 16, COND, cell="gru") if recurrent else glow(DIM, 4, 16, COND)
+    lead = (8, 5) if recurrent else (64,)
     flow(torch.randn(*lead, DIM), torch.randn(*lead, COND))  # initialise on ordinary data
     randomise(flow)
     x = 1e3 * torch.randn(*lead, DIM)
@@ -415,21 +445,23 @@ def test_large_inputs_give_finite_outputs(conditioner):
     z, logdet = flow(x, cond)[:2]
     x_back, _ = flow.inverse(z, cond)[:2]
     log_prob = flow.log_prob(x, cond)
-    log_prob = log_prob[0] if conditioner == "gru" else log_prob
+    log_prob = log_prob[0] if recurrent else log_prob
     log_prob.sum().backward()
     for tensor in (z, logdet, x_back, log_prob, flow.inverse(x, cond)[0]):
         assert torch.isfinite(tensor).all()
     assert all(torch.isfinite(p.grad).all() for p in flow.parameters())
 
 
-def test_glow_is_reproducible_and_leaves_the_global_generator_alone():
+@pytest.mark.parametrize("build", [glow, recurrent_glow])
+def test_flows_are_reproducible_and_leave_the_global_generator_alone(build):
     torch.manual_seed(123)
     before = torch.get_rng_state()
-    first, second = glow(6, 2, 8, seed=7), glow(6, 2, 8, seed=7)
+    first, second = build(6, 2, 8, seed=7), build(6, 2, 8, seed=7)
     assert torch.equal(torch.get_rng_state(), before)
     for (name, a), b in zip(first.state_dict().items(), second.state_dict().values(), strict=True):
         assert torch.equal(a, b), name
-    assert not torch.equal(glow(6, 2, 8, seed=8).steps[0].linear.lower, first.steps[0].linear.lower)
+    other = build(6, 2, 8, seed=8)
+    assert not torch.equal(other.steps[0].linear.lower, first.steps[0].linear.lower)
 
 
 # ------------------------------------------------------------------------------- bad input
@@ -438,6 +470,10 @@ def test_glow_is_reproducible_and_leaves_the_global_generator_alone():
 def test_bad_inputs_raise_clear_errors():
     flow = glow(DIM, 2, 8, cond_dim=COND)
     x, cond = torch.randn(8, DIM), torch.randn(8, COND)
+    with pytest.raises(UninitialisedFlowError, match="not seen any data"):
+        flow.sample(cond=cond)
+    with pytest.raises(UninitialisedFlowError):
+        flow.inverse(x, cond)
     with pytest.raises(ValueError, match=r"x must have shape \(B, D\) = \(B, 4\) or \(B, T, D\)"):
         flow.log_prob(torch.randn(8, DIM + 1), cond)
     with pytest.raises(ValueError, match=r"cond must have shape \(B, C\) = \(8, 3\)"):
@@ -452,24 +488,27 @@ def test_bad_inputs_raise_clear_errors():
     bad[3, 1] = float("nan")
     with pytest.raises(ValueError, match=r"non-finite.*first: \[3\]"):
         flow.log_prob(bad, cond)
+    flow.log_prob(x, cond)  # initialises
     bad_cond = cond.clone()
     bad_cond[5, 0] = math.inf
     with pytest.raises(ValueError, match=r"cond contains 1 non-finite.*first: \[5\]"):
-        flow.log_prob(x, bad_cond)
+        flow.sample(cond=bad_cond)
+    with pytest.raises(ValueError, match=r"z contains 1 non-finite"):
+        flow.inverse(bad, cond)
     with pytest.raises(TypeError, match="x has dtype torch.float64"):
         flow.log_prob(x.double(), cond.double())
     with pytest.raises(TypeError, match="cond has dtype torch.float64"):
         flow.log_prob(x, cond.double())
-    with pytest.raises(ValueError, match="takes no state"):
-        flow(x, cond, state=())
     with pytest.raises(ValueError, match="temperature"):
         flow.sample(cond=cond, temperature=-1.0)
+    with pytest.raises(TypeError, match="temperature"):
+        flow.sample(cond=cond, temperature="warm")
     with pytest.raises(ValueError, match="sample shape"):
         flow.sample((4,), cond=cond)
 
 
 def test_bad_sequence_inputs_raise_clear_errors():
-    flow = glow(DIM, 2, 8, COND, "lstm", num_layers=1)
+    flow = recurrent_glow(DIM, 2, 8, COND)
     x, cond = torch.randn(2, 5, DIM), torch.randn(2, 5, COND)
     with pytest.raises(
         ValueError, match=r"x must have shape \(B, T, D\) = \(B, T, 4\), got \(2, 4\)"
@@ -477,30 +516,25 @@ def test_bad_sequence_inputs_raise_clear_errors():
         flow.log_prob(x[:, 0], cond[:, 0])
     with pytest.raises(ValueError, match="one entry per step"):
         flow(x, cond, state=flow.initial_state(2)[:1])
-    state = list(flow.initial_state(3))
-    with pytest.raises(ValueError, match=r"\(num_layers, B, hidden\) = \(1, 2, 8\)"):
-        flow(x, cond, state=state)
-    with pytest.raises(ValueError, match=r"a recurrent flow samples sequences.*\(B, T\)"):
-        flow.sample(4)
+    with pytest.raises(ValueError, match=r"give cond \(B, T, C\)"):
+        flow.sample()
 
 
 def test_bad_construction_raises_clear_errors():
-    with pytest.raises(ValueError, match="at least 2 samples"):
-        ActNorm(3)(torch.randn(1, 3))
     with pytest.raises(ValueError, match="dim >= 2"):
         AffineCoupling(1)
-    with pytest.raises(ValueError, match="unknown conditioner"):
-        glow(4, 2, 8, conditioner="transformer")
+    with pytest.raises(ValueError, match="unknown cell"):
+        recurrent_glow(4, 2, 8, cell="transformer")
     with pytest.raises(ValueError, match="unknown init"):
         InvertibleLinear(4, init="identity")
     with pytest.raises(ValueError, match="unknown coupling"):
-        FlowStep(4, coupling="spline")
+        glow(4, 2, 8, coupling="spline")
+    with pytest.raises(ValueError, match="unknown coupling"):
+        recurrent_glow(4, 2, 8, coupling="spline")
     with pytest.raises(ValueError, match="df"):
-        glow(4, 2, 8, base="student_t")
-    with pytest.raises(ValueError, match="df"):
-        StudentT(4, df=-1.0)
-    with pytest.raises(ValueError, match="in_features=2"):
-        AffineCoupling(4, 0, conditioner=torch.nn.Linear(3, 4))
+        glow(4, 2, 8, df=-1.0)
+    with pytest.raises(ValueError, match="steps must be at least 1"):
+        glow(4, 0, 8)
 
 
 # --------------------------------------------------------------------------- toy densities

@@ -1,4 +1,4 @@
-"""Normalising flows: Glow's bijections and conditional, recurrent flows built from them.
+"""Normalising flows: Glow's bijections, and flows over vectors and over sequences.
 
 A normalising flow is an invertible map ``f`` from data ``x`` to noise ``z`` with a tractable
 Jacobian. By the change of variables,
@@ -8,22 +8,21 @@ Jacobian. By the change of variables,
 so a flow is trained by maximising the exact log-likelihood and sampled by drawing ``z`` from
 the base distribution ``p_Z`` and inverting: ``x = f^-1(z; c)``.
 
-Building blocks (each usable alone, each with ``forward`` = data -> noise and ``inverse`` =
-noise -> data, both returning the output and its log-determinant per sample ``(B,)``):
+Building blocks, each usable alone, each with ``forward`` = data -> noise and ``inverse`` = noise ->
+data, returning the output and its log-determinant per sample ``(B,)``:
 
 * :class:`ActNorm` (:mod:`~gesturelib.flows.actnorm`): per-feature scale and bias, initialised
-  from the first batch.
+  from the first batch;
 * :class:`InvertibleLinear` (:mod:`~gesturelib.flows.linear`): Glow's invertible 1x1 convolution
-  on vectors, LU-decomposed.
-* :class:`AffineCoupling`, :class:`AdditiveCoupling` (:mod:`~gesturelib.flows.coupling`) with
-  :class:`MLPConditioner`, :class:`LSTMConditioner` or :class:`GRUConditioner`, each ending in
-  a :class:`ZeroLinear` layer (:mod:`~gesturelib.flows.conditioners`).
+  on vectors, LU-decomposed;
+* :class:`AffineCoupling`, :class:`AdditiveCoupling` (MLP conditioner) and
+  :class:`RecurrentCoupling` (LSTM or GRU conditioner, which also takes and returns a state)
+  (:mod:`~gesturelib.flows.coupling`, :mod:`~gesturelib.flows.conditioners`);
 * :class:`StandardNormal`, :class:`StudentT` (:mod:`~gesturelib.flows.base`): base distributions.
-* :class:`FlowStep` (ActNorm -> linear -> coupling), :class:`Flow` and the factory :func:`glow`
-  (:mod:`~gesturelib.flows.flow`), which also documents the conventions for conditions,
-  sequences ``(B, T, D)`` and the explicit recurrent state used by MoGlow.
 
-Example::
+Flows: :class:`Flow` (frames independent; built by :func:`glow`) returns ``(z, logdet)``;
+:class:`RecurrentFlow` (MoGlow's; built by :func:`recurrent_glow`) works on sequences and returns
+``(z, logdet, state)``. Example::
 
     flow = glow(dim=2, steps=8, hidden=64)
     loss = -flow.log_prob(x).mean()          # x (B, 2)
@@ -32,34 +31,30 @@ Example::
 
 from gesturelib.flows.actnorm import ActNorm
 from gesturelib.flows.base import StandardNormal, StudentT
-from gesturelib.flows.conditioners import (
-    ConditionerState,
-    GRUConditioner,
-    LSTMConditioner,
-    MLPConditioner,
-    ZeroLinear,
-    make_conditioner,
-)
-from gesturelib.flows.coupling import AdditiveCoupling, AffineCoupling
-from gesturelib.flows.flow import Flow, FlowState, FlowStep, glow
+from gesturelib.flows.conditioners import MLPConditioner, RecurrentConditioner, ZeroLinear
+from gesturelib.flows.coupling import AdditiveCoupling, AffineCoupling, RecurrentCoupling
+from gesturelib.flows.flow import Flow, FlowStep, UninitialisedFlowError, glow
 from gesturelib.flows.linear import InvertibleLinear, random_rotation
+from gesturelib.flows.recurrent import FlowState, RecurrentFlow, RecurrentFlowStep, recurrent_glow
 
 __all__ = [
     "ActNorm",
     "AdditiveCoupling",
     "AffineCoupling",
-    "ConditionerState",
     "Flow",
     "FlowState",
     "FlowStep",
-    "GRUConditioner",
     "InvertibleLinear",
-    "LSTMConditioner",
     "MLPConditioner",
+    "RecurrentConditioner",
+    "RecurrentCoupling",
+    "RecurrentFlow",
+    "RecurrentFlowStep",
     "StandardNormal",
     "StudentT",
+    "UninitialisedFlowError",
     "ZeroLinear",
     "glow",
-    "make_conditioner",
     "random_rotation",
+    "recurrent_glow",
 ]

@@ -17,15 +17,15 @@ unchanged: ``x_b = (y_b - t) * exp(-s)``. The Jacobian is triangular, so
   the exact identity (Glow's ``sigmoid(raw + 2)`` starts at a scale of 0.88 instead);
 * the scale can grow or shrink symmetrically (``exp(s)`` in ``[e^-c, e^c]``), where the sigmoid
   only contracts in the data -> noise direction;
-* it is bounded, so one coupling cannot blow activations up by more than ``e^c`` per step, which
-  keeps training stable and outputs finite for large inputs;
+* it is bounded, so one coupling cannot blow activations up by more than ``e^c``, which keeps
+  training stable and outputs finite for large inputs;
 * its slope is 1 at 0, so small scales are learned as fast as with a plain ``exp``.
 
-With a recurrent conditioner (LSTM, GRU) the coupling works on sequences ``(B, T, D)``: the
-network at frame ``t`` sees ``[x_a, cond]`` of frames ``1..t`` through its state. The Jacobian
-over a whole sequence is then block lower-triangular, and its log-determinant is still the sum of
-the per-frame ``sum(s)``. Such a coupling takes the recurrent ``state`` as an argument and returns
-the new state as a third output; a feed-forward coupling returns two outputs.
+:class:`AffineCoupling` and :class:`AdditiveCoupling` have an MLP conditioner and act on every
+frame alone; :class:`RecurrentCoupling` has an LSTM or GRU conditioner and works on sequences
+``(B, T, D)``: the network at frame ``t`` sees ``[x_a, cond]`` of frames ``1..t`` through its state.
+The Jacobian over a whole sequence is then block lower-triangular, and its log-determinant is still
+the sum of the per-frame ``sum(s)``.
 """
 
 from __future__ import annotations
@@ -33,166 +33,134 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from gesturelib.flows.checks import check_cond, check_features, sum_per_sample
-from gesturelib.flows.conditioners import ConditionerState, make_conditioner
+from gesturelib.flows.checks import sum_per_sample
+from gesturelib.flows.conditioners import ConditionerState, MLPConditioner, RecurrentConditioner
 
 
-class _Coupling(nn.Module):
-    """What affine and additive couplings share: the split, the conditioner, the checks."""
+class _Split(nn.Module):
+    """What every coupling shares: the split into halves and the elementwise transform."""
 
-    #: how many parameters the conditioner outputs per transformed feature
-    params_per_feature: int
-
-    def __init__(
-        self,
-        dim: int,
-        cond_dim: int = 0,
-        hidden: int = 64,
-        conditioner: str | nn.Module = "mlp",
-        num_layers: int = 2,
-    ):
+    def __init__(self, dim: int, cond_dim: int, additive: bool, clamp: float):
         super().__init__()
         if dim < 2:
             raise ValueError(
                 f"a coupling splits the features in two, so it needs dim >= 2, got {dim}"
             )
-        if cond_dim < 0:
-            raise ValueError(f"cond_dim must be >= 0, got {cond_dim}")
-        self.dim, self.cond_dim = dim, cond_dim
-        self.split = dim // 2
-        in_features = self.split + cond_dim
-        out_features = self.params_per_feature * (dim - self.split)
-        if isinstance(conditioner, str):
-            conditioner = make_conditioner(
-                conditioner, in_features, out_features, hidden, num_layers
-            )
-        else:
-            sizes = (
-                getattr(conditioner, "in_features", None),
-                getattr(conditioner, "out_features", None),
-            )
-            if sizes != (in_features, out_features) or not hasattr(conditioner, "recurrent"):
-                raise ValueError(
-                    f"this coupling needs a conditioner with in_features={in_features}, "
-                    f"out_features={out_features} and a `recurrent` attribute; got {sizes}"
-                )
-        self.conditioner = conditioner
+        if not clamp > 0:
+            raise ValueError(f"clamp must be positive, got {clamp}")
+        self.dim, self.cond_dim, self.split = dim, cond_dim, dim // 2
+        self.additive, self.clamp = additive, float(clamp)
+        self.in_features = self.split + cond_dim
+        self.out_features = (1 if additive else 2) * (dim - self.split)
 
-    @property
-    def recurrent(self) -> bool:
-        """True if the conditioner is recurrent (then inputs are ``(B, T, D)`` and state flows)."""
-        return bool(self.conditioner.recurrent)
+    def log_scale(self, raw: torch.Tensor) -> torch.Tensor:
+        """The bounded log-scale ``s = clamp * tanh(raw / clamp)``, in ``(-clamp, clamp)``."""
+        return self.clamp * torch.tanh(raw / self.clamp)
 
-    def forward(
-        self, x: torch.Tensor, cond: torch.Tensor | None = None, state: ConditionerState = None
-    ):
-        """Data -> noise.
+    def conditioner_inputs(self, x: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
+        """``[x_a, cond]`` ``(..., D // 2 + C)``."""
+        untouched = x[..., : self.split]
+        return untouched if cond is None else torch.cat([untouched, cond], dim=-1)
 
-        Args:
-            x: ``(B, D)`` or ``(B, T, D)``; ``(B, T, D)`` only for a recurrent conditioner.
-            cond: ``(B, C)`` or ``(B, T, C)`` matching ``x``, or None if ``cond_dim == 0``.
-            state: recurrent conditioners only: the conditioner state after the previous frame,
-                or None for the start of a sequence.
-        Returns:
-            ``(y, logdet)``, or ``(y, logdet, state)`` for a recurrent conditioner: ``y`` of the
-            shape of ``x``, ``logdet`` ``(B,)`` the log|det dy/dx| of each sample summed over its
-            frames, ``state`` the conditioner state after the last frame.
-        """
-        return self._outputs(*self._run(x, cond, state, inverse=False))
-
-    def inverse(
-        self, y: torch.Tensor, cond: torch.Tensor | None = None, state: ConditionerState = None
-    ):
-        """Noise -> data; arguments and outputs as :meth:`forward`, with ``logdet`` the
-        log|det dx/dy| of the inverse map (the negative of the forward one at ``x``)."""
-        return self._outputs(*self._run(y, cond, state, inverse=True))
-
-    def _outputs(self, y, logdet, state):
-        return (y, logdet, state) if self.recurrent else (y, logdet)
-
-    def _run(self, x, cond, state, inverse: bool):
-        """Both directions, always returning ``(y, logdet, state)``; used by :class:`FlowStep`."""
-        check_features(
-            x, self.dim, name="y" if inverse else "x", sequence=True if self.recurrent else None
-        )
-        check_cond(cond, self.cond_dim, x)
-        if state is not None and not self.recurrent:
-            raise ValueError("this coupling's conditioner is feed-forward: it takes no state")
+    def transform(self, x: torch.Tensor, params: torch.Tensor, inverse: bool):
+        """Transform the second half of ``x`` ``(..., D)`` with the conditioner's ``params``;
+        returns the whole ``y`` and ``logdet`` ``(B,)``."""
         untouched, changed = x[..., : self.split], x[..., self.split :]
-        inputs = untouched if cond is None else torch.cat([untouched, cond], dim=-1)
-        params, state = self.conditioner(inputs, state)
-        changed, logdet = self._transform(changed, params, inverse)
-        return torch.cat([untouched, changed], dim=-1), logdet, state
-
-    def _transform(self, x_b, params, inverse: bool) -> tuple[torch.Tensor, torch.Tensor]:
-        """Transform the second half ``x_b`` ``(..., D - D//2)``; return it and logdet ``(B,)``."""
-        raise NotImplementedError
+        if self.additive:
+            changed = changed - params if inverse else changed + params
+            logdet = x.new_zeros(x.shape[0])
+        else:
+            shift, raw = params.chunk(2, dim=-1)
+            log_scale = self.log_scale(raw)
+            if inverse:
+                changed, logdet = (changed - shift) * torch.exp(-log_scale), -log_scale
+            else:
+                changed, logdet = changed * torch.exp(log_scale) + shift, log_scale
+            logdet = sum_per_sample(logdet)
+        return torch.cat([untouched, changed], dim=-1), logdet
 
     def extra_repr(self) -> str:
-        return f"dim={self.dim}, cond_dim={self.cond_dim}, split={self.split}"
+        kind = "additive" if self.additive else f"affine, clamp={self.clamp}"
+        return f"dim={self.dim}, cond_dim={self.cond_dim}, {kind}"
 
 
-class AffineCoupling(_Coupling):
-    """Affine coupling ``y_b = x_b * exp(s) + t`` with a soft-clamped log-scale ``s``.
+class AffineCoupling(_Split):
+    """Affine coupling ``y_b = x_b * exp(s) + t`` with an MLP conditioner, frame by frame.
 
-    Direction: :meth:`forward` maps data to noise; :meth:`inverse` maps back.
+    Direction: :meth:`forward` maps data to noise; :meth:`inverse` maps back. Inputs ``(B, D)``
+    or ``(B, T, D)`` with a condition ``(B, C)`` / ``(B, T, C)`` (or None); the log-determinant is
+    per sample, ``(B,)``, summed over frames.
 
     Args:
         dim: number of features ``D`` (at least 2).
         cond_dim: number of condition features ``C`` (0 for none).
-        hidden: width of the conditioner's hidden layers (or recurrent state).
-        conditioner: ``"mlp"``, ``"lstm"``, ``"gru"`` or a conditioner module (see
-            :mod:`gesturelib.flows.conditioners`) with ``in_features = D//2 + C`` and
-            ``out_features = 2 * (D - D//2)``.
-        num_layers: hidden layers of the MLP, or stacked recurrent layers.
-        clamp: bound ``c`` of the log-scale, ``s = c * tanh(raw / c)`` (see the module docstring).
+        hidden: width of the conditioner's hidden layers.
+        num_layers: hidden layers of the conditioner.
+        clamp: bound of the log-scale (see the module docstring).
     """
 
-    params_per_feature = 2
+    additive = False
+
+    def __init__(
+        self, dim: int, cond_dim: int = 0, hidden: int = 64, num_layers: int = 2, clamp=2.0
+    ):
+        super().__init__(dim, cond_dim, self.additive, clamp)
+        self.conditioner = MLPConditioner(self.in_features, self.out_features, hidden, num_layers)
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None):
+        """Data -> noise: ``(y, logdet)``."""
+        return self.transform(x, self.conditioner(self.conditioner_inputs(x, cond)), False)
+
+    def inverse(self, y: torch.Tensor, cond: torch.Tensor | None = None):
+        """Noise -> data: ``(x, logdet)``, the log-determinant of the inverse map."""
+        return self.transform(y, self.conditioner(self.conditioner_inputs(y, cond)), True)
+
+
+class AdditiveCoupling(AffineCoupling):
+    """Additive coupling ``y_b = x_b + t`` (volume-preserving: logdet 0), as in NICE.
+
+    Args: as :class:`AffineCoupling` (``clamp`` is unused).
+    """
+
+    additive = True
+
+
+class RecurrentCoupling(_Split):
+    """Affine or additive coupling whose conditioner is an LSTM or GRU: sequences ``(B, T, D)``.
+
+    Direction: :meth:`forward` maps data to noise; :meth:`inverse` maps back. Both take the
+    conditioner's state after the previous frame (None at the start of a sequence) and return
+    ``(y, logdet (B,), state)``.
+
+    Args:
+        dim, cond_dim, hidden, clamp: as :class:`AffineCoupling` (``hidden``: the state's width).
+        cell: ``"lstm"`` or ``"gru"``.
+        num_layers: stacked recurrent layers.
+        additive: an additive coupling instead of an affine one.
+    """
 
     def __init__(
         self,
         dim: int,
         cond_dim: int = 0,
         hidden: int = 64,
-        conditioner: str | nn.Module = "mlp",
-        num_layers: int = 2,
+        *,
+        cell: str = "lstm",
+        num_layers: int = 1,
+        additive: bool = False,
         clamp: float = 2.0,
     ):
-        super().__init__(dim, cond_dim, hidden, conditioner, num_layers)
-        if not clamp > 0:
-            raise ValueError(f"clamp must be positive, got {clamp}")
-        self.clamp = float(clamp)
+        super().__init__(dim, cond_dim, additive, clamp)
+        self.conditioner = RecurrentConditioner(
+            self.in_features, self.out_features, hidden, cell, num_layers
+        )
 
-    def log_scale(self, raw: torch.Tensor) -> torch.Tensor:
-        """The bounded log-scale ``s = clamp * tanh(raw / clamp)``, in ``(-clamp, clamp)``."""
-        return self.clamp * torch.tanh(raw / self.clamp)
+    def forward(self, x: torch.Tensor, cond=None, state: ConditionerState = None):
+        """Data -> noise: ``(y, logdet, state)``."""
+        params, state = self.conditioner(self.conditioner_inputs(x, cond), state)
+        return (*self.transform(x, params, False), state)
 
-    def _transform(self, x_b, params, inverse):
-        shift, raw = params.chunk(2, dim=-1)
-        log_scale = self.log_scale(raw)
-        if inverse:
-            return (x_b - shift) * torch.exp(-log_scale), -sum_per_sample(log_scale)
-        return x_b * torch.exp(log_scale) + shift, sum_per_sample(log_scale)
-
-    def extra_repr(self) -> str:
-        return f"{super().extra_repr()}, clamp={self.clamp}"
-
-
-class AdditiveCoupling(_Coupling):
-    """Additive coupling ``y_b = x_b + t`` (volume-preserving: logdet 0), as in NICE.
-
-    Direction: :meth:`forward` maps data to noise; :meth:`inverse` maps back.
-
-    Args: as :class:`AffineCoupling` without ``clamp``; a conditioner module needs
-    ``out_features = D - D//2``.
-    """
-
-    params_per_feature = 1
-
-    def _transform(self, x_b, params, inverse):
-        logdet = x_b.new_zeros(x_b.shape[0])
-        return (x_b - params if inverse else x_b + params), logdet
-
-
-COUPLINGS: dict[str, type[_Coupling]] = {"affine": AffineCoupling, "additive": AdditiveCoupling}
+    def inverse(self, y: torch.Tensor, cond=None, state: ConditionerState = None):
+        """Noise -> data: ``(x, logdet, state)``."""
+        params, state = self.conditioner(self.conditioner_inputs(y, cond), state)
+        return (*self.transform(y, params, True), state)

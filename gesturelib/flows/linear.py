@@ -15,20 +15,18 @@ Two parametrisations:
 Both start from an orthogonal matrix, so at initialisation the layer only mixes and its
 log-determinant is zero:
 
-* ``init="rotation"`` (default, Glow's choice): a random rotation, which mixes every feature with
-  every other, the right start in the dozens of dimensions of a pose;
+* ``init="rotation"``: a random rotation (Glow's choice), which mixes every feature with every
+  other: the right start in the dozens of dimensions of a pose;
 * ``init="reverse"``: the permutation that reverses the feature order. With the coupling's fixed
   split into halves, consecutive couplings then alternate which half they transform, as the
-  alternating masks of RealNVP. This matters in very few dimensions: in 2D a random rotation can
-  leave two consecutive couplings transforming nearly the same direction, which wastes a step.
-  In 2D it is the better start on the toy densities of ``benchmarks/flows_vs_reference.py``
-  (held-out NLL in nats over 16 seeds, the README has the whole table): clearly on eight
-  Gaussians (1.784 ± 0.009 against 1.807 ± 0.019 from random rotations) and the checkerboard
-  (2.180 ± 0.022 against 2.209 ± 0.037), and with a much smaller spread on two moons
-  (1.706 ± 0.012 against 1.720 ± 0.037, where two rotation-started runs end at 1.79 and 1.82).
+  alternating masks of RealNVP. In two dimensions this is the better start: a random rotation
+  can leave two consecutive couplings transforming nearly the same direction, which wastes a
+  step (:func:`~gesturelib.flows.glow` uses it for ``dim == 2``; ``docs/benchmarks.md`` measures
+  both).
 
-The inverse matrix is computed in float64 on every call and never cached, so it cannot go stale
-after an optimiser step.
+The inverse matrix is computed in float64 from the current parameters on every call, so it cannot
+go stale after an optimiser step; only inside :meth:`~gesturelib.flows.Flow.fixed_weights`, where
+the weights are promised not to change, is it computed once (frame-by-frame sampling needs that).
 """
 
 from __future__ import annotations
@@ -37,19 +35,12 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from gesturelib.flows.checks import check_features, frames_per_sample
-
 #: The initial matrices :class:`InvertibleLinear` can start from.
 INITS = ("rotation", "reverse")
 
 
 def random_rotation(dim: int, generator: torch.Generator | None = None) -> torch.Tensor:
-    """A rotation matrix ``(dim, dim)`` drawn uniformly (Haar measure), in float64.
-
-    Args:
-        dim: the size ``D``.
-        generator: torch generator for reproducibility (the global one if None).
-    """
+    """A rotation matrix ``(dim, dim)`` drawn uniformly (Haar measure), in float64."""
     gaussian = torch.randn(dim, dim, generator=generator, dtype=torch.float64)
     q, r = torch.linalg.qr(gaussian)
     q = q * torch.sign(torch.diagonal(r))  # makes the draw uniform over orthogonal matrices
@@ -62,13 +53,13 @@ class InvertibleLinear(nn.Module):
     """``y = W x`` with an invertible ``W`` ``(D, D)``, LU-decomposed by default.
 
     Direction: :meth:`forward` maps data to noise (``y = W x``); :meth:`inverse` maps back.
+    Inputs are ``(B, D)`` or ``(B, T, D)``; the log-determinant is per sample, ``(B,)``.
 
     Args:
         dim: number of features ``D``.
         lu: LU parametrisation (True) or a plain matrix (False); see the module docstring.
         generator: torch generator for the random initial rotation (the global one if None).
-        init: the initial matrix, ``"rotation"`` (random) or ``"reverse"`` (the permutation that
-            reverses the features); see the module docstring.
+        init: the initial matrix, ``"rotation"`` or ``"reverse"``; see the module docstring.
     """
 
     def __init__(
@@ -90,23 +81,23 @@ class InvertibleLinear(nn.Module):
         else:
             start = torch.eye(dim, dtype=torch.float64).flip(0)
         dtype = torch.get_default_dtype()
-        if lu:
-            permutation, lower, upper = torch.linalg.lu(start)
-            diagonal = torch.diagonal(upper)
-            self.register_buffer("permutation", permutation.to(dtype))
-            self.register_buffer("sign_s", torch.sign(diagonal).to(dtype))
-            self.register_buffer("lower_mask", torch.tril(torch.ones(dim, dim, dtype=dtype), -1))
-            self.lower = nn.Parameter(torch.tril(lower, -1).to(dtype))
-            self.upper = nn.Parameter(torch.triu(upper, 1).to(dtype))
-            self.log_abs_s = nn.Parameter(torch.log(diagonal.abs()).to(dtype))
-        else:
+        self.fixed_inverse: torch.Tensor | None = None  # set only inside Flow.fixed_weights()
+        if not lu:
             self.weight = nn.Parameter(start.to(dtype))
+            return
+        permutation, lower, upper = torch.linalg.lu(start)
+        diagonal = torch.diagonal(upper)
+        self.register_buffer("permutation", permutation.to(dtype))
+        self.register_buffer("sign_s", torch.sign(diagonal).to(dtype))
+        self.register_buffer("eye", torch.eye(dim, dtype=dtype), persistent=False)
+        self.lower = nn.Parameter(torch.tril(lower, -1).to(dtype))
+        self.upper = nn.Parameter(torch.triu(upper, 1).to(dtype))
+        self.log_abs_s = nn.Parameter(torch.log(diagonal.abs()).to(dtype))
 
     def _lu_factors(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``L`` (unit lower-triangular) and ``U`` (upper-triangular with diagonal ``s``)."""
-        eye = torch.eye(self.dim, dtype=self.lower.dtype, device=self.lower.device)
-        lower = self.lower * self.lower_mask + eye
-        upper = self.upper * self.lower_mask.T + torch.diag(self.sign_s * torch.exp(self.log_abs_s))
+        lower = torch.tril(self.lower, -1) + self.eye
+        upper = torch.triu(self.upper, 1) + torch.diag(self.sign_s * torch.exp(self.log_abs_s))
         return lower, upper
 
     def weight_matrix(self) -> torch.Tensor:
@@ -114,19 +105,18 @@ class InvertibleLinear(nn.Module):
         if not self.lu:
             return self.weight
         lower, upper = self._lu_factors()
-        return self.permutation @ lower @ upper
+        return self.permutation @ (lower @ upper)
 
     def inverse_matrix(self) -> torch.Tensor:
-        """``W^-1`` ``(D, D)``, computed in float64 from the current parameters (never cached)."""
+        """``W^-1`` ``(D, D)``, computed in float64 from the current parameters."""
         if not self.lu:
             return torch.linalg.inv(self.weight.double()).to(self.weight.dtype)
         lower, upper = (factor.double() for factor in self._lu_factors())
-        eye = torch.eye(self.dim, dtype=torch.float64, device=lower.device)
+        eye = self.eye.double()
         # W^-1 = U^-1 L^-1 P^T, each triangular inverse by a triangular solve.
         lower_inv = torch.linalg.solve_triangular(lower, eye, upper=False, unitriangular=True)
         upper_inv = torch.linalg.solve_triangular(upper, eye, upper=True)
-        inverse = upper_inv @ lower_inv @ self.permutation.double().T
-        return inverse.to(self.lower.dtype)
+        return (upper_inv @ lower_inv @ self.permutation.double().T).to(self.lower.dtype)
 
     def log_abs_det(self) -> torch.Tensor:
         """``log|det W|``, a scalar (per frame)."""
@@ -135,28 +125,17 @@ class InvertibleLinear(nn.Module):
         return torch.linalg.slogdet(self.weight)[1]
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Data -> noise: ``y = W x`` for every frame.
-
-        Args:
-            x: ``(B, D)`` or ``(B, T, D)``.
-        Returns:
-            ``y`` of the shape of ``x`` and ``logdet`` ``(B,)``: ``T * log|det W|`` per sample.
-        """
-        check_features(x, self.dim)
-        y = F.linear(x, self.weight_matrix())
-        return y, (self.log_abs_det() * frames_per_sample(x)).expand(x.shape[0])
+        """Data -> noise: ``y = W x`` for every frame. Returns ``(y, logdet (B,))``."""
+        return F.linear(x, self.weight_matrix()), self._logdet(x, 1.0)
 
     def inverse(self, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Noise -> data: ``x = W^-1 y`` for every frame.
+        """Noise -> data: ``x = W^-1 y`` for every frame. Returns ``(x, logdet (B,))``."""
+        matrix = self.fixed_inverse if self.fixed_inverse is not None else self.inverse_matrix()
+        return F.linear(y, matrix), self._logdet(y, -1.0)
 
-        Args:
-            y: ``(B, D)`` or ``(B, T, D)``.
-        Returns:
-            ``x`` of the shape of ``y`` and ``logdet`` ``(B,)``: ``-T * log|det W|`` per sample.
-        """
-        check_features(y, self.dim, name="y")
-        x = F.linear(y, self.inverse_matrix())
-        return x, (-self.log_abs_det() * frames_per_sample(y)).expand(y.shape[0])
+    def _logdet(self, x: torch.Tensor, sign: float) -> torch.Tensor:
+        frames = x.shape[1] if x.dim() == 3 else 1
+        return (sign * frames * self.log_abs_det()).expand(x.shape[0])
 
     def extra_repr(self) -> str:
         return f"dim={self.dim}, lu={self.lu}, init={self.init!r}"
