@@ -5,7 +5,8 @@ import pytest
 import torch
 
 import data_synth
-from gesturelib.checkpoints import config_from_dict, config_to_dict, load_model, read_checkpoint
+from gesturelib.checkpoints import load_model, read_checkpoint
+from gesturelib.configs import config_from_dict, config_to_dict
 from gesturelib.data import WindowConfig, make_datasets
 from gesturelib.models import (
     CVAE,
@@ -326,7 +327,7 @@ def test_aud2repr2pose_config_round_trips_through_a_dict():
     config = Aud2Repr2PoseConfig.quick(autoencoder=MotionDAEConfig(hidden_sizes=(16, 12)))
     assert config_from_dict(Aud2Repr2PoseConfig, config_to_dict(config)) == config
     with pytest.raises(ValueError, match="representation_dim"):
-        Aud2Repr2PoseConfig.from_dict({"autoencoder": {"representation_dim": 0}})
+        config_from_dict(Aud2Repr2PoseConfig, {"autoencoder": {"representation_dim": 0}})
 
 
 # ---------------------------------------------------------------------------------------------

@@ -12,11 +12,11 @@ from gesturelib import checkpoints
 from gesturelib.checkpoints import (
     CheckpointError,
     CheckpointMismatchError,
-    config_from_dict,
     load_model,
     read_checkpoint,
     save_checkpoint,
 )
+from gesturelib.configs import config_from_dict
 from gesturelib.data import Normaliser
 from gesturelib.train import (
     History,
@@ -467,6 +467,46 @@ def test_mismatched_checkpoints_are_refused_with_the_difference(tmp_path):
         CheckpointMismatchError, match=r"best.pt.*\n.*net.0.weight.*\(4, 5\).*\(4, 3\)"
     ):
         load_model(best, ToyRegressor)
+
+
+def test_a_finished_run_is_not_reused_for_other_data(tmp_path):
+    train(make_model(), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
+    other = toy_data(64, seed=9)
+    with pytest.raises(
+        CheckpointMismatchError, match=r"(?s)training data: the file has .*overwrite"
+    ):
+        train(make_model(), other, VAL, config(epochs=1), tmp_path, progress=False)
+
+
+def test_a_checkpoint_folder_that_is_a_file_is_refused(tmp_path):
+    path = tmp_path / "run"
+    path.write_text("notes")
+    with pytest.raises(CheckpointError, match="run is a file, not a folder"):
+        train(make_model(), TRAIN, VAL, config(epochs=1), path, progress=False)
+    assert path.read_text() == "notes"
+
+
+def test_a_full_disk_is_named_and_leaves_the_checkpoints_intact(tmp_path, monkeypatch):
+    train(make_model(), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
+    before = read_checkpoint(tmp_path / "last.pt")["epoch"]
+
+    def full_disk(contents, file):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(checkpoints.torch, "save", full_disk)
+    with pytest.raises(CheckpointError, match=r"no space left on the device to write .*\.pt"):
+        train(make_model(), TRAIN, VAL, config(epochs=2), tmp_path, progress=False)
+    monkeypatch.undo()
+    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["best.pt", "last.pt"]
+
+
+def test_a_checkpoint_of_another_format_version_says_to_retrain(tmp_path):
+    train(make_model(), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
+    contents = torch.load(tmp_path / "best.pt", weights_only=True)
+    torch.save({**contents, "version": 1}, tmp_path / "best.pt")
+    with pytest.raises(CheckpointError, match="version 1.*Retrain"):
+        load_model(tmp_path / "best.pt", ToyRegressor)
 
 
 # ---------------------------------------------------------------------------------------------

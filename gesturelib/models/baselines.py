@@ -67,7 +67,6 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
-from gesturelib.checkpoints import dataclass_from_dict
 from gesturelib.conventions import N_MELS, NUM_ACTIVITIES
 from gesturelib.models.common import batch_parts, check_config_fields, eval_mode, mlp
 from gesturelib.skeleton import POSE_DIM
@@ -352,14 +351,6 @@ class Aud2Repr2PoseConfig(SpeechEncoderConfig):
         return dataclasses.replace(
             cls(hidden_size=16, autoencoder=MotionDAEConfig.quick()), **changes
         )
-
-    @classmethod
-    def from_dict(cls, data: dict) -> Aud2Repr2PoseConfig:
-        """Inverse of ``dataclasses.asdict`` (the nested autoencoder config included)."""
-        values = dict(data) if isinstance(data, dict) else data
-        if isinstance(values, dict) and isinstance(values.get("autoencoder"), dict):
-            values["autoencoder"] = dataclass_from_dict(MotionDAEConfig, values["autoencoder"])
-        return dataclass_from_dict(cls, values)
 
 
 class Aud2Repr2Pose(nn.Module):
