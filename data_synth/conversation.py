@@ -199,25 +199,28 @@ def check_duration(duration_s, where: str) -> float:
     return duration_s
 
 
-def draw_turns(duration_s: float, seed: int, config: ConversationConfig) -> list[Phrase]:
+def draw_turns(
+    duration_s: float, seed: int, config: ConversationConfig, where: str = "duration_s"
+) -> list[Phrase]:
     """The turns of conversation ``seed`` (cheap: no audio); ``ConfigError`` if none holds a phrase.
 
-    :func:`data_synth.write_dataset` calls it for every conversation before writing any.
+    :func:`data_synth.write_dataset` calls it for every conversation before writing any; ``where``
+    is the caller's name for the duration, for the message.
     """
     utterances = sample_turns(duration_s, config.turns, _stream(seed, _TURNS))
     if not utterances:
         turns = config.turns
         some, every = opening_phrase_fits(turns)
         reason = (
-            f"no seed can fit a phrase in duration_s = {duration_s:g} s"
+            f"no seed can fit a phrase in {where} = {duration_s:g} s"
             if duration_s < some
-            else f"seed {seed} draws no phrase in duration_s = {duration_s:g} s"
+            else f"seed {seed} draws no phrase in {where} = {duration_s:g} s"
         )
         raise ConfigError(
             f"{reason}: a conversation needs speech, and the lead-in (TurnConfig.lead_in_s = "
             f"{turns.lead_in_s}) and the opening phrase (TurnConfig.a_phrase_s = "
             f"{turns.a_phrase_s}, TurnConfig.b_phrase_s = {turns.b_phrase_s}) must end "
-            f"{END_MARGIN_S:g} s before the end; make duration_s at least {every:.3g} s (every "
+            f"{END_MARGIN_S:g} s before the end; make {where} at least {every:.3g} s (every "
             "seed then has speech) or shorten those ranges"
         )
     return utterances
@@ -420,7 +423,7 @@ def _check_arrays(path: Path, n_frames: int, activity, rotations, positions) -> 
     if bad.size:
         raise DatasetError(
             f"{path}: activity code {activity[bad[0]]} at frame {bad[0]} is not one of "
-            f"0..{NUM_ACTIVITIES - 1} ({bad.size} such frames); {_REWRITE}"
+            f"0..{NUM_ACTIVITIES - 1} ({bad.size} of {n_frames} frames are out of range); {_REWRITE}"
         )
     for name in ("rotations", "positions"):
         array = arrays[name]
@@ -431,6 +434,6 @@ def _check_arrays(path: Path, n_frames: int, activity, rotations, positions) -> 
         bad = np.flatnonzero(~np.isfinite(array).reshape(n_frames, -1).all(axis=1))
         if bad.size:
             raise DatasetError(
-                f"{path}: {name} holds NaN or infinite values at frame {bad[0]} ({bad.size} such "
-                f"frames); {_REWRITE}"
+                f"{path}: {name} holds NaN or infinite values at frame {bad[0]} ({bad.size} of "
+                f"{n_frames} frames); {_REWRITE}"
             )

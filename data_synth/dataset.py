@@ -123,7 +123,7 @@ def write_dataset(
     index = 0
     for split in SPLITS:
         for _ in range(sizes[split]):
-            draw_turns(conversation_s, conversation_seed(seed, index), config)  # has speech?
+            draw_turns(conversation_s, conversation_seed(seed, index), config, "conversation_s")
             plan.append((split, index, out_dir / split / f"conv_{index:04d}"))
             index += 1
     manifest_path = out_dir / MANIFEST_NAME

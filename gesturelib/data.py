@@ -150,7 +150,7 @@ class ConversationFeatures:
             if bad.size:
                 raise ValueError(
                     f"ConversationFeatures.{name} holds NaN or infinite values at frame {bad[0]} "
-                    f"({bad.size} frames): fix or regenerate the conversation"
+                    f"({bad.size} of {len(array)} frames): fix or regenerate the conversation"
                 )
             lengths[name] = len(array)
             object.__setattr__(self, name, array)
@@ -251,6 +251,11 @@ class Normaliser:
     def fit(cls, features: Sequence[ConversationFeatures]) -> Normaliser:
         """Statistics over every frame of ``features`` (the training split, mirrored or not)."""
         _check_features_list(features, "features")
+        bands = sorted({f.speech.shape[1] for f in features})
+        if len(bands) > 1:
+            raise ValueError(
+                f"features mix speech of {bands} mel bands; compute all with one n_mels"
+            )
         pose = np.concatenate([f.pose for f in features]).astype(np.float64)
         speech = np.concatenate([f.speech for f in features]).astype(np.float64)
         return cls(

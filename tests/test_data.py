@@ -244,6 +244,13 @@ def test_datasets_refuse_what_is_not_a_list_of_features(features):
     )
     with pytest.raises(ValueError, match="27 mel bands but the normaliser was fitted on 20"):
         WindowDataset([features], config, twenty_bands)
+    with pytest.raises(ValueError, match=r"mix speech of \[20, 27\] mel bands"):
+        Normaliser.fit(
+            [
+                features,
+                ConversationFeatures(features.pose, features.speech[:, :20], features.activity),
+            ]
+        )
     with pytest.raises(ValueError, match="split 'val' has no conversations"):
         make_datasets({"train": [fake_conversation(60, 11)], "val": []}, config)
     with pytest.raises(TypeError, match="lacks"):

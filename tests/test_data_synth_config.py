@@ -157,7 +157,9 @@ def test_a_config_that_leaves_no_room_for_speech_is_refused_naming_the_fields():
 
 def test_write_dataset_refuses_sizes_that_cannot_work_before_writing(tmp_path):
     out = tmp_path / "data"
-    with pytest.raises(ConfigError, match="draws no phrase in duration_s = 2 s"):
+    with pytest.raises(
+        ConfigError, match="draws no phrase in conversation_s = 2 s.*conversation_s at least 4.1 s"
+    ):
         write_dataset(out, 0.1, 0, conversation_s=2.0, progress=False)
     with pytest.raises(ConfigError, match="30000 conversations, more than the 10000"):
         write_dataset(out, 1000.0, 0, conversation_s=2.0, progress=False)

@@ -433,6 +433,13 @@ def test_features_refuse_integer_pcm(extract, dtype, advice):
         extract(pcm, 16000)
 
 
+def test_save_audio_refuses_a_folder(tmp_path):
+    (tmp_path / "take.wav").mkdir()
+    for overwrite in (False, True):  # "already exists; pass overwrite=True" misled before
+        with pytest.raises(IsADirectoryError, match="take.wav: it is a folder"):
+            save_audio(tmp_path / "take.wav", sine(440, 0.1, 16000), 16000, overwrite=overwrite)
+
+
 def test_save_audio_refuses_integer_pcm(tmp_path):
     with pytest.raises(AudioError, match="divide by 32768"):
         save_audio(tmp_path / "pcm.wav", (sine(440, 0.1, 16000) * 32767).astype(np.int16), 16000)
