@@ -39,6 +39,7 @@ How each rule is measured: :mod:`data_synth.emphasis` (beat timing from the audi
 """
 
 from data_synth.config import (
+    ConfigError,
     ConversationConfig,
     MotionConfig,
     StyleRanges,
@@ -47,7 +48,10 @@ from data_synth.config import (
 )
 from data_synth.conversation import (
     GENERATOR_VERSION,
+    MAX_DURATION_S,
+    MIN_DURATION_S,
     Conversation,
+    DatasetError,
     generate_conversation,
     load_conversation,
     resample_motion,
@@ -67,8 +71,12 @@ from data_synth.style import Style
 __version__ = GENERATOR_VERSION
 
 __all__ = [
+    "MAX_DURATION_S",
+    "MIN_DURATION_S",
+    "ConfigError",
     "Conversation",
     "ConversationConfig",
+    "DatasetError",
     "Events",
     "MotionConfig",
     "Style",

@@ -10,8 +10,10 @@
 * :class:`ConversationConfig`: all of the above plus the frame and sample rates.
 
 A pair ``(low, high)`` is a range from which a value is drawn uniformly. The defaults are what
-the dataset uses; change one with ``dataclasses.replace``. A bad value raises ``ValueError``
-naming the field, what it got and what it expected, e.g.
+the dataset uses; change one with ``dataclasses.replace``. Numbers may be Python's or NumPy's
+scalars (``np.float64(0.2)``, ``np.int64(16000)``); they are stored as Python numbers, so a
+config reads the same and writes the same JSON whichever was given. A bad value raises
+:class:`ConfigError` (a ``ValueError``) naming the field, what it got and what it expected, e.g.
 ``TurnConfig.overlap_probability must be in [0, 1], got 1.5``.
 """
 
@@ -20,52 +22,72 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields
 
+import numpy as np
+
 from gesturelib.conventions import FPS, SAMPLE_RATE
+
+
+class ConfigError(ValueError):
+    """A generator parameter that cannot be used: a config field, a duration, a seed or a size.
+
+    The message names the parameter, what it got and what it expects.
+    """
+
 
 # --------------------------------------------------------------------------- checks
 
 
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _check_value(
+def check_value(
     value,
     where: str,
     low: float | None = None,
     high: float | None = None,
     low_open: bool = False,
     integer: bool = False,
-) -> None:
-    """``value`` must be a finite number in ``[low, high]`` (``(low, high]`` if ``low_open``)."""
+):
+    """``value`` as a Python number, which must be finite and in ``[low, high]``.
+
+    ``(low, high]`` if ``low_open``; an integer if ``integer``. NumPy scalars are accepted and
+    returned as Python numbers; booleans and strings are refused. Raises :class:`ConfigError`
+    naming ``where``.
+    """
+    if isinstance(value, np.generic):
+        value = value.item()  # np.float32(0.5) -> 0.5, np.int64(3) -> 3, np.bool_ -> bool
     if integer and not (isinstance(value, int) and not isinstance(value, bool)):
-        raise ValueError(f"{where} must be an integer, got {value!r}")
-    if not _is_number(value):
-        raise ValueError(f"{where} must be a finite number, got {value!r}")
+        raise ConfigError(f"{where} must be an integer, got {value!r}")
+    if not (
+        isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    ):
+        raise ConfigError(f"{where} must be a finite number, got {value!r}")
     too_low = low is not None and (value <= low if low_open else value < low)
     too_high = high is not None and value > high
     if too_low or too_high:
         left = "(" if low_open else "["
         interval = f"{left}{'-inf' if low is None else low}, {'inf' if high is None else high}]"
-        raise ValueError(f"{where} must be in {interval}, got {value!r}")
+        raise ConfigError(f"{where} must be in {interval}, got {value!r}")
+    return value
 
 
 def _check_number(config, name: str, *args, **kwargs) -> None:
-    """``config.name`` must be a finite number in the interval (see :func:`_check_value`)."""
-    _check_value(getattr(config, name), f"{type(config).__name__}.{name}", *args, **kwargs)
+    """``config.name`` must be a finite number in the interval (see :func:`check_value`)."""
+    value = check_value(getattr(config, name), f"{type(config).__name__}.{name}", *args, **kwargs)
+    object.__setattr__(config, name, value)  # a NumPy scalar becomes a Python number
 
 
 def _check_range(config, name: str, *args, **kwargs) -> None:
     """``config.name`` must be a pair ``(a, b)`` with ``a <= b``, both in the interval."""
     value = getattr(config, name)
     where = f"{type(config).__name__}.{name}"
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        value = tuple(value)
     if not (isinstance(value, (tuple, list)) and len(value) == 2):
-        raise ValueError(f"{where} must be a pair (low, high), got {value!r}")
-    for end in value:
-        _check_value(end, f"both ends of {where} = {value!r}", *args, **kwargs)
+        raise ConfigError(f"{where} must be a pair (low, high), got {value!r}")
+    value = tuple(
+        check_value(end, f"both ends of {where} = {value!r}", *args, **kwargs) for end in value
+    )
     if value[0] > value[1]:
-        raise ValueError(f"{where} must be a pair (low, high) with low <= high, got {value!r}")
-    object.__setattr__(config, name, tuple(value))  # a list (from JSON) becomes a tuple
+        raise ConfigError(f"{where} must be a pair (low, high) with low <= high, got {value!r}")
+    object.__setattr__(config, name, value)  # a list (from JSON) or an array becomes a tuple
 
 
 def _probability(config, name: str) -> None:
@@ -139,13 +161,13 @@ class TurnConfig:
         ):
             _probability(self, name)
         if self.overlap_probability + self.long_silence_probability > 1.0:
-            raise ValueError(
+            raise ConfigError(
                 "TurnConfig.overlap_probability + TurnConfig.long_silence_probability must not "
                 f"exceed 1, got {self.overlap_probability} + {self.long_silence_probability}"
             )
         shortest_phrase = min(self.a_phrase_s[0], self.b_phrase_s[0])
         if self.overlap_s[1] >= shortest_phrase:
-            raise ValueError(
+            raise ConfigError(
                 f"TurnConfig.overlap_s must stay below the shortest phrase ({shortest_phrase} s) "
                 f"so that an overlap never swallows a whole phrase, got {self.overlap_s!r}"
             )
@@ -331,7 +353,7 @@ class ConversationConfig:
             ("style", StyleRanges),
         ):
             if not isinstance(getattr(self, name), kind):
-                raise ValueError(
+                raise ConfigError(
                     f"ConversationConfig.{name} must be a {kind.__name__}, "
                     f"got {type(getattr(self, name)).__name__}"
                 )
@@ -339,7 +361,7 @@ class ConversationConfig:
         _check_number(self, "fps", 1, integer=True)
         shortest_phrase = self.turns.a_phrase_s[0]
         if self.motion.stroke_lead_s >= shortest_phrase:
-            raise ValueError(
+            raise ConfigError(
                 f"MotionConfig.stroke_lead_s ({self.motion.stroke_lead_s} s) must be shorter than "
                 f"the shortest phrase of A (TurnConfig.a_phrase_s[0] = {shortest_phrase} s)"
             )
@@ -348,13 +370,13 @@ class ConversationConfig:
         closest_accents = self.voice.accent_spacing_syllables[0] / self.voice.syllable_rate_hz[1]
         slowest_stroke = self.motion.stroke_duration_s / self.style.speed[0]
         if slowest_stroke >= 0.8 * closest_accents:
-            raise ValueError(
+            raise ConfigError(
                 f"MotionConfig.stroke_duration_s / StyleRanges.speed[0] = {slowest_stroke:.3g} s "
                 f"must be below 0.8 x the closest spacing of accents ({closest_accents:.3g} s) "
                 "so that consecutive beats do not collide"
             )
         if self.voice.b_lowpass_hz >= self.sample_rate / 2:
-            raise ValueError(
+            raise ConfigError(
                 f"VoiceConfig.b_lowpass_hz ({self.voice.b_lowpass_hz} Hz) must be below the "
                 f"Nyquist frequency ({self.sample_rate / 2} Hz)"
             )
@@ -390,11 +412,11 @@ class ConversationConfig:
 
 def _check_keys(data, kind, where: str) -> None:
     if not isinstance(data, dict):
-        raise ValueError(f"{where} must be a dictionary, got {type(data).__name__}")
+        raise ConfigError(f"{where} must be a dictionary, got {type(data).__name__}")
     expected = {f.name for f in fields(kind)}
     unknown, missing = set(data) - expected, expected - set(data)
     if unknown or missing:
-        raise ValueError(
+        raise ConfigError(
             f"{where} does not match {kind.__name__}: unknown keys {sorted(unknown)}, "
             f"missing keys {sorted(missing)}"
         )

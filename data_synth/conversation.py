@@ -15,34 +15,55 @@ speech cannot explain, the floor that no model can beat.
 Files (:func:`save_conversation`, :func:`load_conversation`): ``STEM.wav`` (the mono mix, 16-bit
 PCM), ``STEM.npz`` (``activity`` ``(T,)``, ``rotations`` ``(T, 9, 6)``, ``positions``
 ``(T, 9, 3)``) and ``STEM.json`` (seeds, rates, duration, style, voices, configuration, events,
-all readable in a text editor).
+all readable in a text editor). Loading checks what it reads (shapes, finite motion, activity
+codes in range) and raises :class:`DatasetError` naming the damaged file.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
+import zipfile
+import zlib
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from data_synth.config import ConversationConfig
-from data_synth.events import Events
+from data_synth.config import ConfigError, ConversationConfig, check_value
+from data_synth.events import Events, Phrase
 from data_synth.motion import AgentMotion, generate_motion
 from data_synth.prosody import plan_speech
 from data_synth.style import Style, draw_style
-from data_synth.turns import activity_codes, sample_turns
+from data_synth.turns import END_MARGIN_S, activity_codes, opening_phrase_fits, sample_turns
 from data_synth.voice import Voice, draw_voices, mix, synthesize_speech
+from gesturelib.conventions import NUM_ACTIVITIES
 from gesturelib.features import load_audio, num_frames, save_audio
 from gesturelib.skeleton import NUM_JOINTS
 
 #: Version of the generator's rules; written into every file and manifest.
 GENERATOR_VERSION = "1.1"
 FILE_FORMAT = "data_synth.conversation"
-#: The shortest conversation: long enough for a phrase and its preparation.
+#: The shortest conversation accepted. With the default turns a conversation shorter than about
+#: 4 s may draw no phrase at all for some seeds; such a draw is refused (see
+#: :func:`generate_conversation`).
 MIN_DURATION_S = 2.0
+#: The longest conversation: one is made in memory, about 0.7 MB a second (0.4 GB and 15 s of
+#: one CPU core for 600 s). Longer recordings are several conversations (a dataset).
+MAX_DURATION_S = 600.0
+
+_REWRITE = (
+    "restore the file, or write the conversation again (save_conversation; for a dataset, "
+    "write_dataset(..., overwrite=True) or `python -m data_synth --out DIR --overwrite`)"
+)
+
+
+class DatasetError(ValueError):
+    """A conversation or dataset file that cannot be used: damaged, inconsistent or out of range.
+
+    The message names the file and says how to replace it.
+    """
+
 
 # Independent random streams drawn from the seeds.
 _TURNS, _SPEECH_A, _SPEECH_B, _VOICES, _AUDIO, _STYLE, _MOTION = range(7)
@@ -92,9 +113,7 @@ class Conversation:
 
 
 def _check_seed(seed, name: str) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"{name} must be a non-negative integer, got {seed!r}")
-    return int(seed)
+    return check_value(seed, f"{name} (a non-negative integer)", 0, integer=True)
 
 
 def _stream(seed: int, stream: int) -> np.random.Generator:
@@ -111,31 +130,27 @@ def generate_conversation(
     """Generate a dyadic conversation and the agent's motion.
 
     Args:
-        duration_s: length of the audio in seconds (at least :data:`MIN_DURATION_S`).
+        duration_s: length of the audio in seconds, from :data:`MIN_DURATION_S` to
+            :data:`MAX_DURATION_S`.
         seed: the conversation seed (turns, words, voices, audio, style).
         config: the generator's parameters; ``None`` for the defaults.
         motion_seed: the motion seed; ``None`` uses ``seed``.
     Returns:
         The :class:`Conversation`. The same seeds and config give identical arrays.
+    Raises:
+        ConfigError: for a bad duration, seed or config, and when the turns drawn hold no
+            phrase (the lead-in and the opening phrase do not fit in ``duration_s``): a
+            conversation without speech is of no use here. The message names the fields.
     """
-    if (
-        isinstance(duration_s, bool)
-        or not isinstance(duration_s, (int, float))
-        or not math.isfinite(duration_s)
-        or duration_s < MIN_DURATION_S
-    ):
-        raise ValueError(
-            f"duration_s must be a number of seconds >= {MIN_DURATION_S}, got {duration_s!r}"
-        )
+    duration_s = float(check_duration(duration_s, "duration_s"))
     seed = _check_seed(seed, "seed")
     motion_seed = seed if motion_seed is None else _check_seed(motion_seed, "motion_seed")
     config = ConversationConfig() if config is None else config
     if not isinstance(config, ConversationConfig):
-        raise ValueError(f"config must be a ConversationConfig, got {type(config).__name__}")
+        raise ConfigError(f"config must be a ConversationConfig, got {type(config).__name__}")
 
-    duration_s = float(duration_s)
     n_samples = int(round(duration_s * config.sample_rate))
-    utterances = sample_turns(duration_s, config.turns, _stream(seed, _TURNS))
+    utterances = draw_turns(duration_s, seed, config)
     voices = draw_voices(config.voice, _stream(seed, _VOICES))
     plans = {
         speaker: plan_speech(utterances, speaker, config.voice, duration_s, _stream(seed, stream))
@@ -172,6 +187,45 @@ def generate_conversation(
     )
 
 
+def check_duration(duration_s, where: str) -> float:
+    """A conversation's length in seconds, checked against the limits; ``ConfigError`` otherwise."""
+    duration_s = check_value(duration_s, f"{where} (seconds)", MIN_DURATION_S)
+    if duration_s > MAX_DURATION_S:
+        raise ConfigError(
+            f"{where} = {duration_s:g} s is longer than MAX_DURATION_S = {MAX_DURATION_S:g} s: a "
+            "conversation is made in memory (about 0.7 MB a second); generate several shorter "
+            "conversations instead (write_dataset splits minutes into conversations)"
+        )
+    return duration_s
+
+
+def draw_turns(
+    duration_s: float, seed: int, config: ConversationConfig, where: str = "duration_s"
+) -> list[Phrase]:
+    """The turns of conversation ``seed`` (cheap: no audio); ``ConfigError`` if none holds a phrase.
+
+    :func:`data_synth.write_dataset` calls it for every conversation before writing any; ``where``
+    is the caller's name for the duration, for the message.
+    """
+    utterances = sample_turns(duration_s, config.turns, _stream(seed, _TURNS))
+    if not utterances:
+        turns = config.turns
+        some, every = opening_phrase_fits(turns)
+        reason = (
+            f"no seed can fit a phrase in {where} = {duration_s:g} s"
+            if duration_s < some
+            else f"seed {seed} draws no phrase in {where} = {duration_s:g} s"
+        )
+        raise ConfigError(
+            f"{reason}: a conversation needs speech, and the lead-in (TurnConfig.lead_in_s = "
+            f"{turns.lead_in_s}) and the opening phrase (TurnConfig.a_phrase_s = "
+            f"{turns.a_phrase_s}, TurnConfig.b_phrase_s = {turns.b_phrase_s}) must end "
+            f"{END_MARGIN_S:g} s before the end; make {where} at least {every:.3g} s (every "
+            "seed then has speech) or shorten those ranges"
+        )
+    return utterances
+
+
 def resample_motion(conversation: Conversation, seed: int) -> Conversation:
     """Draw the agent's motion again for the same conversation, with motion seed ``seed``.
 
@@ -181,7 +235,7 @@ def resample_motion(conversation: Conversation, seed: int) -> Conversation:
     """
     seed = _check_seed(seed, "seed")
     if not isinstance(conversation, Conversation):
-        raise ValueError(f"conversation must be a Conversation, got {type(conversation).__name__}")
+        raise ConfigError(f"conversation must be a Conversation, got {type(conversation).__name__}")
     motion = _draw_motion(
         conversation.events, conversation.style, conversation.config, conversation.num_frames, seed
     )
@@ -283,13 +337,15 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
 
     Raises:
         FileNotFoundError: naming the missing file.
-        ValueError: naming the file whose content is damaged or inconsistent.
+        DatasetError: naming the file whose content is damaged, inconsistent or out of range
+            (a truncated file, wrong shapes, NaN motion, activity codes outside 0..3).
     """
     paths = conversation_paths(path_stem)
     for path in paths.values():
         if not path.is_file():
+            what = "a folder, not a file" if path.is_dir() else "missing"
             raise FileNotFoundError(
-                f"{path} is missing: a conversation needs the .wav, .npz and .json files"
+                f"{path} is {what}: a conversation needs the .wav, .npz and .json files"
             )
     metadata_path = paths["metadata"]
     try:
@@ -300,16 +356,17 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
         events = Events.from_dict(metadata["events"])
         style = Style.from_dict(metadata["style"])
         voices = {speaker: Voice(**voice) for speaker, voice in metadata["voices"].items()}
-        sample_rate, fps = int(metadata["sample_rate"]), int(metadata["fps"])
-        num_samples = int(metadata["num_samples"])
+        sample_rate = check_value(metadata["sample_rate"], "sample_rate", 1, integer=True)
+        fps = check_value(metadata["fps"], "fps", 1, integer=True)
+        num_samples = check_value(metadata["num_samples"], "num_samples", 1, integer=True)
         seeds = int(metadata["conversation_seed"]), int(metadata["motion_seed"])
     except (ValueError, KeyError, TypeError, AttributeError) as error:
-        raise ValueError(f"{metadata_path} is damaged: {error}") from error
+        raise DatasetError(f"{metadata_path} is damaged ({error}); {_REWRITE}") from error
 
     try:
         audio, _ = load_audio(paths["audio"], sample_rate=None)
     except ValueError as error:
-        raise ValueError(f"{paths['audio']} is damaged: {error}") from error
+        raise DatasetError(f"{paths['audio']} is damaged ({error}); {_REWRITE}") from error
     try:
         with np.load(paths["arrays"]) as arrays:
             activity, rotations, positions = (
@@ -317,23 +374,18 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
                 arrays["rotations"],
                 arrays["positions"],
             )
-    except (ValueError, KeyError, OSError, EOFError) as error:
-        raise ValueError(f"{paths['arrays']} is damaged: {error}") from error
-    n_frames = num_frames(num_samples, sample_rate, fps)
+    except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as error:
+        raise DatasetError(
+            f"{paths['arrays']} is damaged or truncated ({error}); {_REWRITE}"
+        ) from error
     if audio.size != num_samples:
-        raise ValueError(
-            f"{paths['audio']} holds {audio.size} samples, but {metadata_path} says {num_samples}"
+        raise DatasetError(
+            f"{paths['audio']} holds {audio.size} samples, but {metadata_path} says "
+            f"{num_samples}; {_REWRITE}"
         )
-    expected = {
-        "activity": (n_frames,),
-        "rotations": (n_frames, NUM_JOINTS, 6),
-        "positions": (n_frames, NUM_JOINTS, 3),
-    }
-    for name, array in (("activity", activity), ("rotations", rotations), ("positions", positions)):
-        if array.shape != expected[name]:
-            raise ValueError(
-                f"{paths['arrays']}: {name} has shape {array.shape}, expected {expected[name]}"
-            )
+    _check_arrays(
+        paths["arrays"], num_frames(num_samples, sample_rate, fps), activity, rotations, positions
+    )
     return Conversation(
         audio,
         sample_rate,
@@ -348,3 +400,40 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
         seeds[1],
         config,
     )
+
+
+def _check_arrays(path: Path, n_frames: int, activity, rotations, positions) -> None:
+    """The arrays of a ``.npz`` file: shapes, integer codes in range, finite motion."""
+    expected = {
+        "activity": (n_frames,),
+        "rotations": (n_frames, NUM_JOINTS, 6),
+        "positions": (n_frames, NUM_JOINTS, 3),
+    }
+    arrays = {"activity": activity, "rotations": rotations, "positions": positions}
+    for name, array in arrays.items():
+        if array.shape != expected[name]:
+            raise DatasetError(
+                f"{path}: {name} has shape {array.shape}, expected {expected[name]}; {_REWRITE}"
+            )
+    if activity.dtype.kind not in "iu":
+        raise DatasetError(
+            f"{path}: activity codes must be integers, got dtype {activity.dtype}; {_REWRITE}"
+        )
+    bad = np.flatnonzero((activity < 0) | (activity >= NUM_ACTIVITIES))
+    if bad.size:
+        raise DatasetError(
+            f"{path}: activity code {activity[bad[0]]} at frame {bad[0]} is not one of "
+            f"0..{NUM_ACTIVITIES - 1} ({bad.size} of {n_frames} frames are out of range); {_REWRITE}"
+        )
+    for name in ("rotations", "positions"):
+        array = arrays[name]
+        if array.dtype.kind != "f":
+            raise DatasetError(
+                f"{path}: {name} must be floats, got dtype {array.dtype}; {_REWRITE}"
+            )
+        bad = np.flatnonzero(~np.isfinite(array).reshape(n_frames, -1).all(axis=1))
+        if bad.size:
+            raise DatasetError(
+                f"{path}: {name} holds NaN or infinite values at frame {bad[0]} ({bad.size} of "
+                f"{n_frames} frames); {_REWRITE}"
+            )

@@ -15,25 +15,32 @@ go to validation and 10 % to test (at least one each), the rest to training.
 
 The manifest is written last: a folder without one is an incomplete dataset. Writing refuses to
 replace an existing dataset (or any file it would write) unless ``overwrite`` is given; even then
-it only deletes files that the old manifest lists, never anything else in the folder.
+it only deletes files that the old manifest lists, never anything else in the folder. Every
+conversation's turns are drawn before anything is written, so a size that cannot work (a
+conversation without speech, too many conversations) is refused with nothing on disk.
+
+Reading checks the manifest whole (every entry, no conversation in two splits, files inside the
+folder) and each conversation's files (see :func:`data_synth.load_conversation`); a damaged one
+raises :class:`~data_synth.conversation.DatasetError` naming the file and how to regenerate it.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from tqdm.auto import tqdm
 
-from data_synth.config import ConversationConfig
+from data_synth.config import ConfigError, ConversationConfig, check_value
 from data_synth.conversation import (
     FILE_FORMAT,
     GENERATOR_VERSION,
-    MIN_DURATION_S,
     Conversation,
+    DatasetError,
+    check_duration,
     conversation_paths,
+    draw_turns,
     generate_conversation,
     load_conversation,
     save_conversation,
@@ -54,7 +61,7 @@ SEED_STRIDE = 10_000
 def split_sizes(n_conversations: int) -> dict[str, int]:
     """How many conversations go to each split (at least one each; needs 3 or more)."""
     if n_conversations < 3:
-        raise ValueError(
+        raise ConfigError(
             f"a dataset needs at least 3 conversations (one per split), got {n_conversations}"
         )
     held_out = max(1, round(HELD_OUT_FRACTION * n_conversations))
@@ -64,7 +71,7 @@ def split_sizes(n_conversations: int) -> dict[str, int]:
 def conversation_seed(dataset_seed: int, index: int) -> int:
     """The conversation seed of conversation ``index`` of a dataset."""
     if not 0 <= index < SEED_STRIDE:
-        raise ValueError(f"index must be in [0, {SEED_STRIDE}), got {index}")
+        raise ConfigError(f"index must be in [0, {SEED_STRIDE}), got {index}")
     return (dataset_seed + 1) * SEED_STRIDE + index
 
 
@@ -82,9 +89,11 @@ def write_dataset(
     Args:
         out_dir: the dataset folder (created if needed).
         minutes: total length; it is split into conversations of ``conversation_s`` seconds
-            (at least 3 conversations).
+            (at least 3, at most ``SEED_STRIDE`` conversations).
         seed: the dataset seed (each conversation gets its own seed from it).
-        conversation_s: length of each conversation in seconds.
+        conversation_s: length of each conversation in seconds (at most
+            :data:`~data_synth.conversation.MAX_DURATION_S`); long enough for every
+            conversation's turns to hold a phrase.
         config: the generator's configuration; ``None`` for the defaults.
         overwrite: replace an existing dataset or files in the way.
         progress: show a progress bar.
@@ -93,32 +102,28 @@ def write_dataset(
     Raises:
         FileExistsError: if ``out_dir`` already holds a dataset or any file this would write,
             and ``overwrite`` is False. Nothing is written then.
-        ValueError: for bad sizes or seeds.
+        ConfigError: (a ``ValueError``) for bad sizes, seeds or config, or a conversation whose
+            turns hold no phrase. Nothing is written then.
     """
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    if not (isinstance(minutes, (int, float)) and math.isfinite(minutes) and minutes > 0):
-        raise ValueError(f"minutes must be a positive number, got {minutes!r}")
-    if not (
-        isinstance(conversation_s, (int, float))
-        and math.isfinite(conversation_s)
-        and conversation_s >= MIN_DURATION_S
-    ):
-        raise ValueError(
-            f"conversation_s must be at least {MIN_DURATION_S} s, got {conversation_s!r}"
-        )
-    config = ConversationConfig() if config is None else config
+    minutes, seed, conversation_s, config = _check_arguments(minutes, seed, conversation_s, config)
     n_conversations = max(3, round(minutes * 60.0 / conversation_s))
+    if n_conversations > SEED_STRIDE:
+        raise ConfigError(
+            f"minutes = {minutes:g} in conversations of {conversation_s:g} s makes "
+            f"{n_conversations} conversations, more than the {SEED_STRIDE} a dataset seed can "
+            "give distinct seeds to; ask for fewer minutes or longer conversations"
+        )
     sizes = split_sizes(n_conversations)
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        raise ValueError(f"{out_dir} exists and is not a folder")
+        raise ConfigError(f"{out_dir} exists and is not a folder")
 
     # Plan every file first, so that a refusal happens before anything is written.
     plan = []
     index = 0
     for split in SPLITS:
         for _ in range(sizes[split]):
+            draw_turns(conversation_s, conversation_seed(seed, index), config, "conversation_s")
             plan.append((split, index, out_dir / split / f"conv_{index:04d}"))
             index += 1
     manifest_path = out_dir / MANIFEST_NAME
@@ -167,6 +172,17 @@ def write_dataset(
     return json.loads(text)  # exactly what read_manifest will give (tuples read back as lists)
 
 
+def _check_arguments(minutes, seed, conversation_s, config) -> tuple:
+    """``(minutes, seed, conversation_s, config)`` checked, as Python numbers; ConfigError if bad."""
+    seed = check_value(seed, "seed (a non-negative integer)", 0, integer=True)
+    minutes = check_value(minutes, "minutes", 0.0, low_open=True)
+    conversation_s = check_duration(conversation_s, "conversation_s")
+    config = ConversationConfig() if config is None else config
+    if not isinstance(config, ConversationConfig):
+        raise ConfigError(f"config must be a ConversationConfig, got {type(config).__name__}")
+    return minutes, seed, conversation_s, config
+
+
 def _provenance(
     minutes: float, seed: int, conversation_s: float, config: ConversationConfig
 ) -> dict:
@@ -208,7 +224,7 @@ def ensure_dataset(
             no manifest. Nothing is written then.
         ValueError: for bad sizes or seeds, or if ``out_dir`` is a file.
     """
-    config = ConversationConfig() if config is None else config
+    minutes, seed, conversation_s, config = _check_arguments(minutes, seed, conversation_s, config)
     # As a manifest reads back: tuples become lists.
     wanted = json.loads(json.dumps(_provenance(minutes, seed, conversation_s, config)))
     stale = False
@@ -244,7 +260,7 @@ def _remove_old_dataset(out_dir: Path, manifest_path: Path, keep: set[Path]) -> 
     try:
         old = read_manifest(out_dir)
     except ValueError:
-        old = {"splits": {}}  # a damaged manifest: leave its files alone
+        old = {"splits": {}}  # a damaged manifest: leave its files alone (ensure_dataset refuses)
     manifest_path.unlink()
     for entries in old["splits"].values():
         for entry in entries:
@@ -257,12 +273,18 @@ def _remove_old_dataset(out_dir: Path, manifest_path: Path, keep: set[Path]) -> 
 def read_manifest(dataset_dir: str | os.PathLike) -> dict:
     """Read and check ``dataset_dir/manifest.json``.
 
+    Every entry of every split must name its conversation, seed, frame count and three files
+    (relative paths inside the folder sharing one stem), and no conversation (file or seed) may
+    be listed twice: a conversation in two splits would test a model on what it trained on.
+
     Raises:
         FileNotFoundError: if the folder or its manifest is missing.
-        ValueError: if the manifest is not a valid data_synth manifest.
+        DatasetError: (a ``ValueError``) if the manifest is not a valid data_synth manifest.
     """
     dataset_dir = Path(dataset_dir)
     path = dataset_dir / MANIFEST_NAME
+    if dataset_dir.exists() and not dataset_dir.is_dir():
+        raise FileNotFoundError(f"{dataset_dir} is a file, not a dataset folder")
     if not dataset_dir.is_dir():
         raise FileNotFoundError(f"dataset folder {dataset_dir} does not exist")
     if not path.is_file():
@@ -273,18 +295,64 @@ def read_manifest(dataset_dir: str | os.PathLike) -> dict:
         )
     try:
         manifest = json.loads(path.read_text())
-        if manifest.get("format") != DATASET_FORMAT:
-            raise ValueError(f"its format is {manifest.get('format')!r}, not {DATASET_FORMAT!r}")
-        for split in SPLITS:
-            for entry in manifest["splits"][split]:
-                if set(entry["files"]) != {"audio", "arrays", "metadata"}:
-                    raise ValueError(
-                        f"entry {entry.get('name')!r} of split {split!r} must list "
-                        "its audio, arrays and metadata files"
-                    )
-    except (ValueError, KeyError, TypeError, AttributeError) as error:
-        raise ValueError(f"{path} is damaged: {error}") from error
+        _check_manifest(manifest)
+    except ValueError as error:
+        raise DatasetError(
+            f"{path} is damaged: {error}; fix it, or regenerate the dataset with "
+            f"`python -m data_synth --out {dataset_dir} --overwrite` "
+            "(or write_dataset(..., overwrite=True))"
+        ) from error
     return manifest
+
+
+def _check_manifest(manifest) -> None:
+    """Raise ``ValueError`` saying what is wrong with a manifest's structure."""
+    if not isinstance(manifest, dict):
+        raise ValueError(f"it holds a {type(manifest).__name__}, not a JSON object")
+    if manifest.get("format") != DATASET_FORMAT:
+        raise ValueError(f"its format is {manifest.get('format')!r}, not {DATASET_FORMAT!r}")
+    splits = manifest.get("splits")
+    if not isinstance(splits, dict) or not all(isinstance(splits.get(s), list) for s in SPLITS):
+        raise ValueError(f"'splits' must map each of {list(SPLITS)} to a list of conversations")
+    listed: dict[object, str] = {}  # stem or seed -> the split that lists it
+    for split in SPLITS:
+        for number, entry in enumerate(splits[split]):
+            where = f"entry {number} of split {split!r}"
+            if not isinstance(entry, dict):
+                raise ValueError(f"{where} is a {type(entry).__name__}, not a JSON object")
+            for key, kind in (("name", str), ("conversation_seed", int), ("num_frames", int)):
+                if not isinstance(entry.get(key), kind) or isinstance(entry.get(key), bool):
+                    raise ValueError(
+                        f"{where} needs {key!r} ({kind.__name__}), got {entry.get(key)!r}"
+                    )
+            stem = _entry_stem(entry, where)
+            for key in (stem, ("seed", entry["conversation_seed"])):
+                if key in listed:
+                    raise ValueError(
+                        f"conversation {entry['name']!r} (seed {entry['conversation_seed']}) is "
+                        f"listed twice, in {listed[key]!r} and {split!r}: a conversation belongs "
+                        "to one split"
+                    )
+                listed[key] = split
+
+
+def _entry_stem(entry: dict, where: str) -> PurePosixPath:
+    """The common stem of an entry's three files, which must be relative paths inside the folder."""
+    files = entry.get("files")
+    if not isinstance(files, dict) or set(files) != {"audio", "arrays", "metadata"}:
+        raise ValueError(f"{where} must list its audio, arrays and metadata files")
+    stems = set()
+    for kind, suffix in (("audio", ".wav"), ("arrays", ".npz"), ("metadata", ".json")):
+        relative = files[kind]
+        if not isinstance(relative, str) or not relative.endswith(suffix):
+            raise ValueError(f"{where}: its {kind} file must be a path ending in {suffix}")
+        relative = PurePosixPath(relative)
+        if relative.is_absolute() or ".." in relative.parts:
+            raise ValueError(f"{where}: its {kind} file {relative} must lie inside the folder")
+        stems.add(relative.with_suffix(""))
+    if len(stems) != 1:
+        raise ValueError(f"{where}: the files of {entry['name']!r} must share one name stem")
+    return stems.pop()
 
 
 def load_split(dataset_dir: str | os.PathLike, split: str) -> list[Conversation]:
@@ -292,7 +360,7 @@ def load_split(dataset_dir: str | os.PathLike, split: str) -> list[Conversation]
 
     Raises:
         FileNotFoundError: naming the missing manifest or conversation file.
-        ValueError: naming the damaged file.
+        DatasetError: (a ``ValueError``) naming the damaged file.
     """
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
@@ -300,22 +368,16 @@ def load_split(dataset_dir: str | os.PathLike, split: str) -> list[Conversation]
     manifest = read_manifest(dataset_dir)
     conversations = []
     for entry in manifest["splits"][split]:
-        audio_path = dataset_dir / entry["files"]["audio"]
-        stem = audio_path.with_name(audio_path.name[: -len(".wav")])
-        for kind, path in conversation_paths(stem).items():
-            if Path(entry["files"][kind]) != path.relative_to(dataset_dir):
-                raise ValueError(
-                    f"{dataset_dir / MANIFEST_NAME}: the files of {entry['name']} "
-                    "must share one name stem"
-                )
+        stem = dataset_dir / _entry_stem(entry, entry["name"])
         conversation = load_conversation(stem)
         if (
             conversation.conversation_seed != entry["conversation_seed"]
             or conversation.num_frames != entry["num_frames"]
         ):
-            raise ValueError(
+            raise DatasetError(
                 f"{stem}.json does not match {dataset_dir / MANIFEST_NAME} (seed or length "
-                "differs): the folder mixes files of different datasets; regenerate it"
+                "differs): the folder mixes files of different datasets; regenerate it with "
+                f"`python -m data_synth --out {dataset_dir} --overwrite`"
             )
         conversations.append(conversation)
     return conversations
@@ -326,6 +388,6 @@ def load_dataset(dataset_dir: str | os.PathLike) -> dict[str, list[Conversation]
 
     Raises:
         FileNotFoundError: naming the missing manifest or conversation file.
-        ValueError: naming the damaged file.
+        DatasetError: (a ``ValueError``) naming the damaged file.
     """
     return {split: load_split(dataset_dir, split) for split in SPLITS}

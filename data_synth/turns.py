@@ -84,6 +84,23 @@ def sample_turns(duration_s: float, config: TurnConfig, rng: np.random.Generator
         speaker = speaker if keep else listener
 
 
+def opening_phrase_fits(config: TurnConfig) -> tuple[float, float]:
+    """Durations in seconds from which the opening phrase fits: for some draws, for every draw.
+
+    The lead-in and the first speaker's first phrase must end :data:`END_MARGIN_S` before the
+    end. A conversation shorter than the first duration never has speech; one at least as long
+    as the second always has.
+    """
+    openers = []
+    if config.first_speaker_a_probability > 0:
+        openers.append(config.a_phrase_s)
+    if config.first_speaker_a_probability < 1:
+        openers.append(config.b_phrase_s)
+    some = config.lead_in_s[0] + min(low for low, _ in openers) + END_MARGIN_S
+    every = config.lead_in_s[1] + max(high for _, high in openers) + END_MARGIN_S
+    return some, every
+
+
 def speaking_mask(utterances: list[Phrase], speaker: str, times: np.ndarray) -> np.ndarray:
     """Whether ``speaker`` is talking at each of ``times`` ``(T,)``: a boolean ``(T,)``.
 

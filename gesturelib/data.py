@@ -28,12 +28,18 @@ lies inside the conversation are used, so no padding value is ever learned.
 Poses and speech features are standardised with statistics fitted on the *training* split only
 (:class:`Normaliser`); mirroring (left-right, :func:`gesturelib.skeleton.mirror_rotations`) doubles
 the training data with the control signal duplicated, as in the Flow-VAE paper.
+
+Checks happen where data enters: :class:`ConversationFeatures` and :class:`Normaliser` refuse
+wrong shapes and non-finite values when they are built (or loaded), and the datasets refuse what
+is not a list of features; past that, the windowing trusts its inputs.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+import numbers
+import os
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Protocol
@@ -80,16 +86,23 @@ class WindowConfig:
     stride: int = 1
 
     def __post_init__(self):
-        for name in ("past_poses", "speech_past", "speech_future"):
-            if not isinstance(getattr(self, name), int) or getattr(self, name) < 0:
+        for name, smallest in (
+            ("past_poses", 0),
+            ("speech_past", 0),
+            ("speech_future", 0),
+            ("sequence_length", 1),
+            ("stride", 1),
+        ):
+            value = getattr(self, name)
+            if (
+                isinstance(value, (bool, np.bool_))
+                or not isinstance(value, numbers.Integral)
+                or value < smallest
+            ):
                 raise ValueError(
-                    f"WindowConfig.{name} must be an integer >= 0, got {getattr(self, name)!r}"
+                    f"WindowConfig.{name} must be an integer >= {smallest}, got {value!r}"
                 )
-        for name in ("sequence_length", "stride"):
-            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
-                raise ValueError(
-                    f"WindowConfig.{name} must be an integer >= 1, got {getattr(self, name)!r}"
-                )
+            object.__setattr__(self, name, int(value))  # np.int64(5) -> 5
 
     @property
     def speech_window(self) -> int:
@@ -108,19 +121,67 @@ class ConversationFeatures:
 
     Attributes:
         pose: ``(T, 54)`` limb rotations, 6D, flattened joint-major.
-        speech: ``(T, 27)`` log-mel.
+        speech: ``(T, n_mels)`` log-mel (27 bands by default).
         activity: ``(T, 4)`` one-hot.
+
+    Raises:
+        ValueError: when built with wrong shapes, arrays of different lengths, or NaN or
+            infinite values; the message names the array and the first bad frame.
     """
 
     pose: np.ndarray
     speech: np.ndarray
     activity: np.ndarray
 
+    def __post_init__(self):
+        lengths = {}
+        for name, width in (("pose", POSE_DIM), ("speech", None), ("activity", NUM_ACTIVITIES)):
+            array = np.asarray(getattr(self, name))
+            if (
+                array.dtype.kind not in "biuf"
+                or array.ndim != 2
+                or (width is not None and array.shape[1] != width)
+            ):
+                raise ValueError(
+                    f"ConversationFeatures.{name} must be a numeric array of shape "
+                    f"(T, {width or 'n_mels'}), got {array.dtype} of shape {array.shape}"
+                )
+            bad = np.flatnonzero(~np.isfinite(array).all(axis=1))
+            if bad.size:
+                raise ValueError(
+                    f"ConversationFeatures.{name} holds NaN or infinite values at frame {bad[0]} "
+                    f"({bad.size} of {len(array)} frames): fix or regenerate the conversation"
+                )
+            lengths[name] = len(array)
+            object.__setattr__(self, name, array)
+        if len(set(lengths.values())) != 1:
+            raise ValueError(
+                f"ConversationFeatures arrays disagree in length: {lengths['pose']} pose frames, "
+                f"{lengths['speech']} speech frames, {lengths['activity']} activity frames (a "
+                "conversation's rotations, audio and activity must cover the same frames)"
+            )
+
     @classmethod
     def from_conversation(
         cls, conversation: ConversationLike, n_mels: int = N_MELS
     ) -> ConversationFeatures:
-        """Compute the features of a conversation; its motion and audio must cover the same frames."""
+        """Compute the features of a conversation; its motion and audio must cover the same frames.
+
+        Raises:
+            TypeError: if ``conversation`` lacks the attributes of :class:`ConversationLike`.
+            ValueError: for wrong shapes, lengths or frame rate, or non-finite rotations;
+                :class:`~gesturelib.features.AudioError` for unusable audio.
+        """
+        missing = [
+            name
+            for name in ("audio", "sample_rate", "fps", "activity", "rotations")
+            if not hasattr(conversation, name)
+        ]
+        if missing:
+            raise TypeError(
+                f"conversation must be a data_synth.Conversation (or have its audio, sample_rate, "
+                f"fps, activity and rotations); a {type(conversation).__name__} lacks {missing}"
+            )
         rotations = np.asarray(conversation.rotations, dtype=np.float32)
         if rotations.ndim != 3 or rotations.shape[1:] != (NUM_JOINTS, 6):
             raise ValueError(
@@ -134,11 +195,6 @@ class ConversationFeatures:
             conversation.audio, conversation.sample_rate, fps=conversation.fps, n_mels=n_mels
         )
         activity = activity_one_hot(np.asarray(conversation.activity))
-        if not len(rotations) == len(speech) == len(activity):
-            raise ValueError(
-                f"conversation arrays disagree in length: {len(rotations)} motion frames, "
-                f"{len(speech)} audio frames, {len(activity)} activity frames"
-            )
         return cls(
             pose=rotations.reshape(len(rotations), POSE_DIM), speech=speech, activity=activity
         )
@@ -166,11 +222,40 @@ class Normaliser:
     speech_mean: np.ndarray  # (n_mels,)
     speech_std: np.ndarray  # (n_mels,)
 
+    def __post_init__(self):
+        n_mels = np.size(self.speech_mean)
+        for name, dim in (
+            ("pose_mean", POSE_DIM),
+            ("pose_std", POSE_DIM),
+            ("speech_mean", n_mels),
+            ("speech_std", n_mels),
+        ):
+            try:
+                value = np.asarray(getattr(self, name), dtype=np.float32)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"Normaliser.{name} must be a list of numbers: {error}") from error
+            if value.shape != (dim,) or dim == 0:
+                raise ValueError(f"Normaliser.{name} must have shape ({dim},), got {value.shape}")
+            is_std = name.endswith("std")
+            usable = np.isfinite(value) & (value > 0 if is_std else True)
+            if not usable.all():
+                index = int(np.flatnonzero(~usable)[0])
+                raise ValueError(
+                    f"Normaliser.{name}[{index}] is {value[index]}, but it must be "
+                    f"{'positive and finite' if is_std else 'finite'}: fit the statistics again "
+                    "(Normaliser.fit on the training split)"
+                )
+            object.__setattr__(self, name, value)
+
     @classmethod
     def fit(cls, features: Sequence[ConversationFeatures]) -> Normaliser:
         """Statistics over every frame of ``features`` (the training split, mirrored or not)."""
-        if not features:
-            raise ValueError("cannot fit a Normaliser on no conversations")
+        _check_features_list(features, "features")
+        bands = sorted({f.speech.shape[1] for f in features})
+        if len(bands) > 1:
+            raise ValueError(
+                f"features mix speech of {bands} mel bands; compute all with one n_mels"
+            )
         pose = np.concatenate([f.pose for f in features]).astype(np.float64)
         speech = np.concatenate([f.speech for f in features]).astype(np.float64)
         return cls(
@@ -182,14 +267,17 @@ class Normaliser:
 
     def normalise_pose(self, pose):
         """``(..., 54)`` raw 6D poses -> standardised."""
+        _check_last_dim(pose, POSE_DIM, "pose")
         return (pose - _like(self.pose_mean, pose)) / _like(self.pose_std, pose)
 
     def denormalise_pose(self, pose):
         """``(..., 54)`` standardised -> raw 6D poses (reshape to ``(..., 9, 6)`` for kinematics)."""
+        _check_last_dim(pose, POSE_DIM, "pose")
         return pose * _like(self.pose_std, pose) + _like(self.pose_mean, pose)
 
     def normalise_speech(self, speech):
         """``(..., n_mels)`` log-mel -> standardised."""
+        _check_last_dim(speech, len(self.speech_mean), "speech")
         return (speech - _like(self.speech_mean, speech)) / _like(self.speech_std, speech)
 
     def to_dict(self) -> dict:
@@ -198,30 +286,73 @@ class Normaliser:
 
     @classmethod
     def from_dict(cls, values: dict) -> Normaliser:
+        """Inverse of :meth:`to_dict`; ``ValueError`` for missing keys, wrong lengths, NaN, std <= 0."""
         expected = {"pose_mean", "pose_std", "speech_mean", "speech_std"}
+        if not isinstance(values, Mapping):
+            raise ValueError(
+                f"normaliser statistics must be a dictionary, got {type(values).__name__}"
+            )
         if set(values) != expected:
             raise ValueError(
-                f"normaliser needs exactly the keys {sorted(expected)}, got {sorted(values)}"
+                f"normaliser needs exactly the keys {sorted(expected)}, got {sorted(map(str, values))}"
             )
-        arrays = {name: np.asarray(value, dtype=np.float32) for name, value in values.items()}
-        if arrays["pose_mean"].shape != (POSE_DIM,) or arrays["pose_std"].shape != (POSE_DIM,):
-            raise ValueError(f"pose statistics must have {POSE_DIM} values each")
-        if arrays["speech_mean"].shape != arrays["speech_std"].shape:
-            raise ValueError("speech mean and std must have the same length")
-        return cls(**arrays)
+        return cls(**values)
 
-    def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict()))
+    def save(self, path: str | os.PathLike, overwrite: bool = False) -> None:
+        """Write the statistics as JSON; an existing file is kept unless ``overwrite``.
+
+        The file is written whole or not at all (a temporary file, then renamed).
+        """
+        path = Path(path)
+        if path.is_dir():
+            raise IsADirectoryError(f"{path} is a folder; give a file name such as normaliser.json")
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} already exists; pass overwrite=True to replace it")
+        temporary = path.with_name(path.name + ".partial")
+        try:
+            temporary.write_text(json.dumps(self.to_dict()))
+            os.replace(temporary, path)
+        finally:
+            temporary.unlink(missing_ok=True)
 
     @classmethod
-    def load(cls, path: str | Path) -> Normaliser:
+    def load(cls, path: str | os.PathLike) -> Normaliser:
+        """Read statistics written by :meth:`save`; ``ValueError`` naming the file if unusable."""
         path = Path(path)
         try:
             return cls.from_dict(json.loads(path.read_text()))
-        except (OSError, json.JSONDecodeError, ValueError) as error:
+        except (OSError, ValueError) as error:
             raise ValueError(
                 f"cannot read normalisation statistics from {path}: {error}"
             ) from error
+
+
+def _check_last_dim(values, dim: int, name: str) -> None:
+    shape = tuple(np.shape(values))
+    if shape[-1:] != (dim,):
+        hint = (
+            f"; flatten the joints: reshape(..., {POSE_DIM})"
+            if shape[-2:] == (NUM_JOINTS, 6)
+            else ""
+        )
+        raise ValueError(f"{name} must have shape (..., {dim}), got {shape}{hint}")
+
+
+def _check_features_list(features, name: str) -> None:
+    """``features`` must be a non-empty list of :class:`ConversationFeatures`."""
+    if isinstance(features, ConversationFeatures) or not isinstance(features, Sequence):
+        raise TypeError(
+            f"{name} must be a list of ConversationFeatures (one per conversation), got "
+            f"{type(features).__name__}"
+        )
+    if not features:
+        raise ValueError(f"{name} is empty: give at least one conversation")
+    for number, item in enumerate(features):
+        if not isinstance(item, ConversationFeatures):
+            raise TypeError(
+                f"{name}[{number}] is a {type(item).__name__}, not ConversationFeatures: compute "
+                "them with ConversationFeatures.from_conversation (or use make_datasets)"
+            )
 
 
 def _like(array: np.ndarray, reference):
@@ -251,6 +382,18 @@ class WindowDataset(Dataset):
         normaliser: Normaliser,
         mirror: bool = False,
     ):
+        _check_features_list(features, "features")
+        if not isinstance(config, WindowConfig):
+            raise TypeError(f"config must be a WindowConfig, got {type(config).__name__}")
+        if not isinstance(normaliser, Normaliser):
+            raise TypeError(f"normaliser must be a Normaliser, got {type(normaliser).__name__}")
+        n_mels = len(normaliser.speech_mean)
+        for number, conversation in enumerate(features):
+            if conversation.speech.shape[1] != n_mels:
+                raise ValueError(
+                    f"features[{number}] has {conversation.speech.shape[1]} mel bands but the "
+                    f"normaliser was fitted on {n_mels}: compute both with the same n_mels"
+                )
         self.config = config
         if mirror:
             features = [*features, *(f.mirrored() for f in features)]
@@ -318,10 +461,22 @@ def make_datasets(
         ``(datasets, normaliser)``: a :class:`WindowDataset` per split, and the fitted statistics
         (save them with the model: :meth:`Normaliser.to_dict`).
     """
+    if not isinstance(splits, Mapping):
+        raise TypeError(
+            f"splits must be a dictionary of conversation lists by split name (as "
+            f"data_synth.load_dataset returns), got {type(splits).__name__}"
+        )
     if "train" not in splits:
         raise ValueError(
             f"splits must include 'train' to fit the normalisation; got {sorted(splits)}"
         )
+    for name, conversations in splits.items():
+        if isinstance(conversations, (str, bytes)) or not isinstance(conversations, Sequence):
+            raise TypeError(
+                f"split {name!r} must be a list of conversations, got {type(conversations).__name__}"
+            )
+        if not conversations:
+            raise ValueError(f"split {name!r} has no conversations; drop it or fill it")
     features = {
         name: [ConversationFeatures.from_conversation(c) for c in convs]
         for name, convs in splits.items()

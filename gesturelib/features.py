@@ -30,7 +30,9 @@ Conventions:
 
 from __future__ import annotations
 
+import numbers
 import os
+import struct
 import warnings
 from pathlib import Path
 
@@ -61,11 +63,18 @@ SILENCE_THRESHOLD = 0.03
 #: Pitch frames per motion frame: F0 is estimated at this finer rate, then averaged per frame.
 PITCH_FRAMES_PER_FRAME = 4
 
+#: The feature functions take samples as floats at full scale [-1, 1]. A signal whose peak is
+#: beyond this (40 dB above full scale) is refused: it is almost surely integer PCM values stored
+#: as floats, and its features would be far off (log-mel about 21 nats too high for 16-bit
+#: values); it also keeps the float32 mel power far from overflow, so features stay finite.
+MAX_PEAK = 100.0
+
 _FRAMES_PER_BLOCK = 4096  # frames analysed at once: bounds memory on long recordings
 
 
 class AudioError(ValueError):
-    """An audio file or signal that cannot be used: empty, unreadable, non-finite, too short."""
+    """An audio file or signal that cannot be used: empty, unreadable, truncated, non-finite,
+    integer-valued, far beyond full scale, or too short."""
 
 
 # --------------------------------------------------------------------------- audio files
@@ -90,18 +99,26 @@ def load_audio(
 
     Raises:
         FileNotFoundError: if ``path`` does not exist.
-        AudioError: if ``path`` is a directory, an empty file, not audio, has no samples, or
-            contains NaN or infinite values. The message names the file.
+        AudioError: if ``path`` is a directory, an empty file, not audio, a WAV file cut short
+            (its header promises more samples than it holds), has no samples, or contains NaN
+            or infinite values. The message names the file.
     """
     path = Path(path)
     if sample_rate is not None:
-        _check_positive_int(sample_rate, "sample_rate")
+        sample_rate = _positive_int(sample_rate, "sample_rate")
     if not path.exists():
         raise FileNotFoundError(f"audio file not found: {path}")
     if path.is_dir():
         raise AudioError(f"{path} is a directory, not an audio file")
     if path.stat().st_size == 0:
         raise AudioError(f"{path} is an empty file (0 bytes), not audio")
+    promised, present = _wav_data_bytes(path)
+    if present < promised:
+        raise AudioError(
+            f"{path} is truncated: its header promises {promised} bytes of samples but the file "
+            f"holds {present} ({present / promised:.0%}); it was cut short (an interrupted copy, "
+            "download or recording): copy or write it again"
+        )
     try:
         data, file_rate = soundfile.read(path, dtype="float32", always_2d=True)
     except (soundfile.LibsndfileError, RuntimeError) as error:
@@ -134,6 +151,28 @@ def load_audio(
     return audio, int(file_rate)
 
 
+def _wav_data_bytes(path: Path) -> tuple[int, int]:
+    """Bytes of samples a RIFF/WAVE file's header promises, and the bytes the file holds after it.
+
+    libsndfile quietly reads what is there when a WAV file was cut short, so we compare the
+    ``data`` chunk's declared size with the file's size ourselves. Other formats, and WAV files
+    whose writer did not know the size (0 or 0xFFFFFFFF, as in streamed or RF64 files), give
+    ``(0, 0)``: nothing to compare.
+    """
+    with open(path, "rb") as file:
+        header = file.read(12)
+        if len(header) < 12 or header[:4] != b"RIFF" or header[8:12] != b"WAVE":
+            return 0, 0
+        while len(chunk := file.read(8)) == 8:
+            size = struct.unpack("<I", chunk[4:])[0]
+            if chunk[:4] == b"data":
+                if size in (0, 0xFFFFFFFF):
+                    return 0, 0
+                return size, path.stat().st_size - file.tell()
+            file.seek(size + size % 2, os.SEEK_CUR)  # chunks are padded to an even length
+    return 0, 0
+
+
 def save_audio(
     path: str | os.PathLike, audio: np.ndarray, sample_rate: int, overwrite: bool = False
 ) -> None:
@@ -144,8 +183,9 @@ def save_audio(
 
     Args:
         path: the file to write; must end in ``.wav`` and its folder must exist.
-        audio: the signal ``(n,)``, finite, at least one sample.
-        sample_rate: its rate in Hz.
+        audio: the signal ``(n,)``, floats at full scale [-1, 1] (peak at most :data:`MAX_PEAK`),
+            finite, at least one sample.
+        sample_rate: its rate in Hz (any integer type).
         overwrite: replace an existing file; by default an existing file is an error.
 
     Raises:
@@ -155,11 +195,13 @@ def save_audio(
     """
     path = Path(path)
     audio = _check_signal(audio, "audio")
-    _check_positive_int(sample_rate, "sample_rate")
+    sample_rate = _positive_int(sample_rate, "sample_rate")
     if path.suffix.lower() != ".wav":
         raise ValueError(f"save_audio writes WAV files; {path} should end in .wav")
     if not path.parent.is_dir():
         raise FileNotFoundError(f"cannot write {path}: the folder {path.parent} does not exist")
+    if path.is_dir():
+        raise IsADirectoryError(f"cannot write {path}: it is a folder")
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} already exists; pass overwrite=True to replace it")
     soundfile.write(path, np.clip(audio, -1.0, 1.0), sample_rate, subtype="PCM_16", format="WAV")
@@ -171,13 +213,15 @@ def save_audio(
 def num_frames(n_samples: int, sample_rate: int, fps: int = FPS) -> int:
     """Number of whole motion frames in ``n_samples`` of audio: ``floor(n_samples / sample_rate * fps)``.
 
-    Computed in integers, so there is no floating-point rounding at frame boundaries.
+    Computed in integers, so there is no floating-point rounding at frame boundaries. Every
+    argument is an integer (Python's or NumPy's).
     """
-    _check_positive_int(sample_rate, "sample_rate")
-    _check_positive_int(fps, "fps")
+    sample_rate = _positive_int(sample_rate, "sample_rate")
+    fps = _positive_int(fps, "fps")
+    n_samples = _integer(n_samples, "n_samples")
     if n_samples < 0:
         raise ValueError(f"n_samples must be >= 0, got {n_samples}")
-    return int(n_samples) * int(fps) // int(sample_rate)
+    return n_samples * fps // sample_rate
 
 
 def _frame_window_starts(n_frames: int, sample_rate: int, fps: int) -> tuple[np.ndarray, int]:
@@ -215,16 +259,19 @@ def mel_spectrogram(
     ``librosa.filters.mel`` (Slaney scale and normalisation) from 0 Hz to ``sample_rate / 2``.
 
     Args:
-        audio: mono signal ``(n,)``, finite, at least one motion frame long.
-        sample_rate: its rate in Hz (an integer).
+        audio: mono signal ``(n,)`` of floats at full scale [-1, 1] (as :func:`load_audio`
+            gives), finite, at least one motion frame long.
+        sample_rate: its rate in Hz (an integer, Python's or NumPy's).
         fps: motion frames per second (an integer).
         n_mels: number of mel bands.
 
     Raises:
-        AudioError: for non-1-D, empty, non-finite or shorter-than-one-frame audio.
+        AudioError: for non-1-D, empty, non-finite, integer-valued (PCM: divide by the full
+            scale first), far too loud (peak above :data:`MAX_PEAK`) or shorter-than-one-frame
+            audio.
     """
-    audio, n_frames = _check_features_input(audio, sample_rate, fps)
-    _check_positive_int(n_mels, "n_mels")
+    audio, sample_rate, fps, n_frames = _check_features_input(audio, sample_rate, fps)
+    n_mels = _positive_int(n_mels, "n_mels")
     starts, window_length = _frame_window_starts(n_frames, sample_rate, fps)
     n_fft = 1 << (window_length - 1).bit_length()  # next power of two >= window_length
     window = librosa.filters.get_window("hann", window_length, fftbins=True).astype(np.float32)
@@ -253,7 +300,7 @@ def mfcc(
     The orthonormal DCT-II (``librosa.feature.mfcc``) of each row of :func:`mel_spectrogram`;
     coefficient 0 is the overall log level. ``n_mfcc`` must not exceed ``n_mels``.
     """
-    _check_positive_int(n_mfcc, "n_mfcc")
+    n_mfcc = _positive_int(n_mfcc, "n_mfcc")
     if n_mfcc > n_mels:
         raise ValueError(f"n_mfcc={n_mfcc} cannot exceed n_mels={n_mels}")
     log_mel = mel_spectrogram(audio, sample_rate, fps=fps, n_mels=n_mels)  # (T, n_mels)
@@ -287,11 +334,12 @@ def prosody(audio: np.ndarray, sample_rate: int, fps: int = FPS) -> np.ndarray:
     would decide voicing itself but takes about 1.5 minutes for the same audio.
 
     Args:
-        audio: mono signal ``(n,)``, finite, at least one motion frame long.
+        audio: mono signal ``(n,)`` of floats at full scale [-1, 1], finite, at least one motion
+            frame long (see :func:`mel_spectrogram`).
         sample_rate: its rate in Hz, at least ``2 * F0_MAX``.
         fps: motion frames per second (an integer).
     """
-    audio, n_frames = _check_features_input(audio, sample_rate, fps)
+    audio, sample_rate, fps, n_frames = _check_features_input(audio, sample_rate, fps)
     if sample_rate < 2 * F0_MAX:
         raise AudioError(
             f"prosody needs sample_rate >= {2 * F0_MAX:g} Hz to find pitch up to {F0_MAX:g} Hz, "
@@ -421,15 +469,35 @@ _VALID_CODES = "valid codes: " + ", ".join(
 # --------------------------------------------------------------------------- input checks
 
 
-def _check_positive_int(value, name: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+def _integer(value, name: str) -> int:
+    """``value`` as a Python int: any integral number (``int``, ``numpy.int64``...), not a bool."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    return int(value)
+
+
+def _positive_int(value, name: str) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or value <= 0:
         raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
 
 
 def _check_signal(audio, name: str) -> np.ndarray:
-    """A finite, non-empty, 1-D real signal as float32 ``(n,)``; AudioError otherwise."""
+    """A signal at full scale: finite, non-empty, 1-D, float, peak <= MAX_PEAK, as float32 ``(n,)``.
+
+    Raises AudioError otherwise, saying how to fix it.
+    """
     audio = np.asarray(audio)
-    if audio.dtype.kind not in "iuf":
+    if audio.dtype.kind in "iu":
+        half = 2 ** (8 * audio.dtype.itemsize - 1)  # the full scale of signed PCM
+        scale = (
+            f"divide by {half}" if audio.dtype.kind == "i" else f"subtract {half}, divide by {half}"
+        )
+        raise AudioError(
+            f"{name} holds integers ({audio.dtype}), but samples must be floats at full scale "
+            f"[-1, 1]: convert integer PCM first ({scale}), or read the file with load_audio"
+        )
+    if audio.dtype.kind != "f":
         raise AudioError(f"{name} must be a real-valued signal, got dtype {audio.dtype}")
     if audio.ndim != 1:
         raise AudioError(
@@ -441,13 +509,24 @@ def _check_signal(audio, name: str) -> np.ndarray:
     not_finite = ~np.isfinite(audio)
     if not_finite.any():
         raise AudioError(f"{name} has {int(not_finite.sum())} NaN or infinite samples")
+    peak = float(np.abs(audio).max())
+    if peak > MAX_PEAK:
+        raise AudioError(
+            f"{name} peaks at {peak:.3g}, far beyond full scale (1): samples must be floats in "
+            "[-1, 1]; if these are integer PCM values stored as floats, divide by the full scale "
+            "(32768 for 16-bit samples), or read the file with load_audio"
+        )
     return audio.astype(np.float32, copy=False)
 
 
-def _check_features_input(audio, sample_rate: int, fps: int) -> tuple[np.ndarray, int]:
-    """Validate a signal for feature extraction; return it as float32 and its frame count T."""
+def _check_features_input(audio, sample_rate, fps) -> tuple[np.ndarray, int, int, int]:
+    """Validate a signal and its rates for feature extraction.
+
+    Returns ``(audio as float32, sample_rate, fps, T)``, the rates as Python ints.
+    """
     audio = _check_signal(audio, "audio")
     n_frames = num_frames(audio.size, sample_rate, fps)
+    sample_rate, fps = int(sample_rate), int(fps)  # num_frames checked that they are integers
     if sample_rate < 2 * fps:
         raise ValueError(
             f"sample_rate={sample_rate} Hz is too low for {fps} fps (< 2 samples a frame)"
@@ -457,4 +536,4 @@ def _check_features_input(audio, sample_rate: int, fps: int) -> tuple[np.ndarray
             f"audio of {audio.size} samples ({audio.size / sample_rate * 1000:.1f} ms at "
             f"{sample_rate} Hz) is shorter than one motion frame ({1000 / fps:.1f} ms at {fps} fps)"
         )
-    return audio, n_frames
+    return audio, sample_rate, fps, n_frames

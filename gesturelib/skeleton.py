@@ -12,6 +12,10 @@ positions and rotations is one-to-one for a fixed set of bone lengths.
 
 Shapes: rotations ``(..., 9, 6)`` in the 6D representation (see :mod:`gesturelib.rotations`),
 positions ``(..., 9, 3)`` in cm; ``...`` is any batch shape, e.g. ``(T,)`` or ``(B, T)``.
+Inputs follow :mod:`gesturelib.rotations`: NumPy arrays, tensors or lists; integers become
+floats; the result is of the input's kind (a NumPy array for a list). A limb without a rotation
+(zero or parallel 6D vectors, a zero-length limb) raises
+:class:`~gesturelib.rotations.RotationError` naming the limb and the frame.
 """
 
 from __future__ import annotations
@@ -20,8 +24,9 @@ import numpy as np
 import torch
 
 from gesturelib.rotations import (
+    RotationError,
+    as_real_array,
     check_trailing_shape,
-    matrix_to_rot6d,
     rot6d_to_matrix,
     shortest_arc,
 )
@@ -105,15 +110,31 @@ def _as_like(array: np.ndarray, like):
 
 
 def _validated_offsets(offsets, like):
-    offsets = T_POSE_OFFSETS if offsets is None else offsets
+    """Offsets ``(9, 3)`` (the T-pose's by default) of the kind, dtype and device of ``like``."""
+    if offsets is None:
+        return _as_like(T_POSE_OFFSETS, like)
+    offsets = as_real_array(offsets, "offsets")
     if tuple(offsets.shape) != (NUM_JOINTS, 3):
         raise ValueError(f"offsets must have shape ({NUM_JOINTS}, 3), got {tuple(offsets.shape)}")
+    lengths = np.linalg.norm(np.array(offsets.tolist()), axis=-1)
+    bad = [name for name, length in zip(KEYPOINTS, lengths, strict=True) if not 0 < length < np.inf]
+    if bad:
+        raise ValueError(f"offsets of {bad} are zero, NaN or infinite: every limb needs a length")
     return _as_like(offsets, like)
+
+
+def _naming_the_limb(function, *args):
+    """Call ``function``; a RotationError at batch index ``(..., joint)`` names the limb."""
+    try:
+        return function(*args)
+    except RotationError as error:
+        *frame, joint = error.index
+        where = f" at index {frame[0] if len(frame) == 1 else tuple(frame)}" if frame else ""
+        raise RotationError(f"limb {KEYPOINTS[joint]!r}{where}: {error}", error.index) from None
 
 
 def t_pose(offsets=None) -> np.ndarray:
     """Keypoint positions ``(9, 3)`` of the T-pose, in cm (root at the origin)."""
-    offsets = T_POSE_OFFSETS if offsets is None else np.asarray(offsets)
     return forward_kinematics(np.tile(identity_rot6d(), (NUM_JOINTS, 1)), offsets)
 
 
@@ -130,12 +151,17 @@ def forward_kinematics(rot6d, offsets=None):
         offsets: ``(9, 3)`` T-pose limb vectors in cm; defaults to :data:`T_POSE_OFFSETS`.
     Returns:
         ``(..., 9, 3)`` positions in cm, the root (spine base) at the origin. Same kind and dtype
-        as ``rot6d``; differentiable for torch inputs. Any 6 numbers per limb are accepted (they
-        are orthonormalised), so bone lengths are preserved whatever a network outputs.
+        as ``rot6d``; differentiable for torch inputs. Any 6 numbers per limb whose two 3-vectors
+        are not parallel are accepted (they are orthonormalised), so bone lengths are preserved
+        whatever a network outputs.
+    Raises:
+        RotationError: naming the limb and frame whose two 3-vectors are zero or parallel (or not
+            finite): they define no rotation, and no position can be given to that limb.
     """
+    rot6d = as_real_array(rot6d, "rot6d")
     check_trailing_shape(rot6d, (NUM_JOINTS, 6), "rot6d")
     offsets = _validated_offsets(offsets, rot6d)
-    limbs = (rot6d_to_matrix(rot6d) @ offsets[:, :, None])[..., 0]  # (..., 9, 3)
+    limbs = (_naming_the_limb(rot6d_to_matrix, rot6d) @ offsets[:, :, None])[..., 0]  # (..., 9, 3)
     positions = []
     for joint, parent in enumerate(PARENTS):
         start = 0.0 if parent < 0 else positions[parent]
@@ -146,6 +172,7 @@ def forward_kinematics(rot6d, offsets=None):
 
 def limb_vectors(positions):
     """Limb vectors ``(..., 9, 3)`` (child minus parent) from positions ``(..., 9, 3)``."""
+    positions = as_real_array(positions, "positions")
     check_trailing_shape(positions, (NUM_JOINTS, 3), "positions")
     parents = positions[..., [max(p, 0) for p in PARENTS], :]
     root_mask = _as_like(np.array([[p >= 0] for p in PARENTS], dtype=float), positions)
@@ -170,14 +197,20 @@ def rotations_from_positions(positions, offsets=None):
         ``(..., 9, 6)`` the shortest-arc rotation from each T-pose limb to the observed limb.
         ``forward_kinematics(rotations_from_positions(p))`` equals ``p`` whenever ``p`` has the
         skeleton's bone lengths; otherwise the directions are kept and the lengths restored.
+    Raises:
+        RotationError: naming the limb and frame of a zero-length limb (a keypoint on its
+            parent), which has no direction.
     """
+    positions = as_real_array(positions, "positions")
     check_trailing_shape(positions, (NUM_JOINTS, 3), "positions")
     offsets = _validated_offsets(offsets, positions)
-    return matrix_to_rot6d(shortest_arc(offsets, limb_vectors(positions)))
+    matrices = _naming_the_limb(shortest_arc, offsets, limb_vectors(positions))  # (..., 9, 3, 3)
+    return matrices[..., :2, :].reshape(*matrices.shape[:-2], 6)  # their 6D: the first two rows
 
 
 def mirror_positions(positions):
     """Left-right mirror image of positions ``(..., 9, 3)``: x negated, left and right swapped."""
+    positions = as_real_array(positions, "positions")
     check_trailing_shape(positions, (NUM_JOINTS, 3), "positions")
     return positions[..., list(MIRROR_INDEX), :] * _as_like(np.diag(_MIRROR), positions)
 
@@ -190,6 +223,7 @@ def mirror_rotations(rot6d):
     left and right. Applying it twice gives back the input, and
     ``forward_kinematics(mirror_rotations(r)) == mirror_positions(forward_kinematics(r))``.
     """
+    rot6d = as_real_array(rot6d, "rot6d")
     check_trailing_shape(rot6d, (NUM_JOINTS, 6), "rot6d")
     swapped = rot6d[..., list(MIRROR_INDEX), :]
     # M R M flips the sign of the entries R[i, k] where exactly one of i, k is the x axis (0).

@@ -1,3 +1,4 @@
+import json
 from dataclasses import dataclass
 
 import numpy as np
@@ -142,7 +143,7 @@ def test_bad_configs_and_inputs_are_rejected(tmp_path, features):
         WindowDataset([features], WindowConfig(sequence_length=100), IDENTITY)
     short_motion = fake_conversation(50, 7)
     short_motion.rotations = short_motion.rotations[:40]
-    with pytest.raises(ValueError, match="40 motion frames, 50 audio frames"):
+    with pytest.raises(ValueError, match="40 pose frames, 50 speech frames, 50 activity frames"):
         ConversationFeatures.from_conversation(short_motion)
     with pytest.raises(ValueError, match=r"must include 'train'"):
         make_datasets({"val": [fake_conversation(70, 8)]}, WindowConfig())
@@ -152,3 +153,112 @@ def test_bad_configs_and_inputs_are_rejected(tmp_path, features):
         ValueError, match="cannot read normalisation statistics from .*normaliser.json"
     ):
         Normaliser.load(corrupt)
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def test_features_of_different_lengths_or_shapes_are_refused(features):
+    pose, speech, activity = features.pose, features.speech, features.activity
+    with pytest.raises(ValueError, match="100 pose frames, 99 speech frames, 100 activity"):
+        ConversationFeatures(pose, speech[:-1], activity)
+    with pytest.raises(
+        ValueError, match=r"pose must be .* \(T, 54\), got float32 of shape \(100, 9, 6\)"
+    ):
+        ConversationFeatures(pose.reshape(100, 9, 6), speech, activity)
+    with pytest.raises(
+        ValueError, match=r"activity must be .* \(T, 4\), got int64 of shape \(100,\)"
+    ):
+        ConversationFeatures(pose, speech, np.zeros(100, dtype=np.int64))
+
+
+def test_nan_poses_are_refused_before_they_reach_the_normaliser(features):
+    pose = features.pose.copy()
+    pose[10, 3] = np.nan
+    with pytest.raises(ValueError, match="pose holds NaN or infinite values at frame 10"):
+        ConversationFeatures(pose, features.speech, features.activity)
+    conversation = fake_conversation(60, seed=9)
+    conversation.rotations[12, 0, 0] = np.inf
+    with pytest.raises(ValueError, match="at frame 12"):
+        make_datasets({"train": [conversation]}, WindowConfig())
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"pose_std": [0.0] * POSE_DIM}, r"pose_std\[0\] is 0.0, but it must be positive"),
+        ({"speech_mean": [float("nan")] * 27}, r"speech_mean\[0\] is nan, but it must be finite"),
+        ({"speech_std": [1.0] * 20}, r"speech_std must have shape \(27,\), got \(20,\)"),
+        ({"pose_mean": ["a"] * POSE_DIM}, "pose_mean must be a list of numbers"),
+    ],
+)
+def test_normaliser_refuses_unusable_statistics(tmp_path, change, message):
+    with pytest.raises(ValueError, match=message):
+        Normaliser.from_dict({**IDENTITY.to_dict(), **change})
+    path = tmp_path / "normaliser.json"
+    path.write_text(json.dumps({**IDENTITY.to_dict(), **change}))
+    with pytest.raises(ValueError, match=f"normaliser.json: .*{message}"):
+        Normaliser.load(path)
+
+
+def test_normaliser_from_something_else_than_a_dictionary(tmp_path):
+    with pytest.raises(ValueError, match="must be a dictionary, got int"):
+        Normaliser.from_dict(5)
+    (tmp_path / "five.json").write_text("5")
+    with pytest.raises(ValueError, match="five.json: .*must be a dictionary"):
+        Normaliser.load(tmp_path / "five.json")
+
+
+def test_normaliser_save_keeps_an_existing_file_unless_asked(tmp_path):
+    path = tmp_path / "normaliser.json"
+    path.write_text("precious")
+    with pytest.raises(
+        FileExistsError, match="normaliser.json already exists; pass overwrite=True"
+    ):
+        IDENTITY.save(path)
+    assert path.read_text() == "precious"
+    IDENTITY.save(path, overwrite=True)
+    np.testing.assert_array_equal(Normaliser.load(path).pose_std, IDENTITY.pose_std)
+    with pytest.raises(IsADirectoryError, match="is a folder"):
+        IDENTITY.save(tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["normaliser.json"]  # no partial file left
+
+
+def test_normalising_a_pose_of_the_wrong_shape_says_how_to_flatten_it(features):
+    with pytest.raises(ValueError, match=r"got \(100, 9, 6\); flatten the joints"):
+        IDENTITY.normalise_pose(features.pose.reshape(100, 9, 6))
+    with pytest.raises(ValueError, match=r"speech must have shape \(\.\.\., 27\)"):
+        IDENTITY.normalise_speech(torch.zeros(3, 20))
+
+
+def test_datasets_refuse_what_is_not_a_list_of_features(features):
+    config = WindowConfig()
+    with pytest.raises(TypeError, match="list of ConversationFeatures .* got ConversationFeatures"):
+        WindowDataset(features, config, IDENTITY)
+    with pytest.raises(TypeError, match=r"features\[0\] is a FakeConversation.*from_conversation"):
+        WindowDataset([fake_conversation(50, 10)], config, IDENTITY)
+    with pytest.raises(ValueError, match="features is empty"):
+        WindowDataset([], config, IDENTITY)
+    twenty_bands = Normaliser(
+        IDENTITY.pose_mean, IDENTITY.pose_std, np.zeros(20, np.float32), np.ones(20, np.float32)
+    )
+    with pytest.raises(ValueError, match="27 mel bands but the normaliser was fitted on 20"):
+        WindowDataset([features], config, twenty_bands)
+    with pytest.raises(ValueError, match=r"mix speech of \[20, 27\] mel bands"):
+        Normaliser.fit(
+            [
+                features,
+                ConversationFeatures(features.pose, features.speech[:, :20], features.activity),
+            ]
+        )
+    with pytest.raises(ValueError, match="split 'val' has no conversations"):
+        make_datasets({"train": [fake_conversation(60, 11)], "val": []}, config)
+    with pytest.raises(TypeError, match="lacks"):
+        ConversationFeatures.from_conversation({"audio": np.zeros(16000)})
+
+
+def test_window_config_takes_any_integer_but_not_a_boolean():
+    config = WindowConfig(past_poses=np.int64(3), stride=np.int32(2))
+    assert config == WindowConfig(past_poses=3, stride=2) and type(config.past_poses) is int
+    with pytest.raises(ValueError, match="stride must be an integer >= 1, got True"):
+        WindowConfig(stride=True)

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from data_synth import (
+    MAX_DURATION_S,
+    ConfigError,
     ConversationConfig,
     MotionConfig,
     StyleRanges,
@@ -17,6 +19,7 @@ from data_synth import (
     generate_conversation,
     resample_motion,
 )
+from data_synth.dataset import write_dataset
 from data_synth.emphasis import emphasis_envelope
 from data_synth.kinematics import euler_matrix, minimum_jerk_path, smooth_noise, two_bone_ik
 
@@ -103,6 +106,66 @@ def test_resample_motion_rejects_a_bad_seed_or_input():
         resample_motion(generate_conversation(3.0, 0), -3)
     with pytest.raises(ValueError, match="Conversation"):
         resample_motion({"audio": None}, 1)
+
+
+def test_numpy_scalars_in_configs_are_stored_as_python_numbers():
+    config = ConversationConfig(
+        turns=TurnConfig(overlap_probability=np.float32(0.25), lead_in_s=np.array([0.3, 1.0])),
+        voice=VoiceConfig(accent_spacing_syllables=(np.int64(3), 5), peak_level=np.float64(0.8)),
+        sample_rate=np.int64(16000),
+    )
+    plain = ConversationConfig(
+        turns=TurnConfig(overlap_probability=0.25, lead_in_s=(0.3, 1.0)),
+        voice=VoiceConfig(accent_spacing_syllables=(3, 5), peak_level=0.8),
+        sample_rate=16000,
+    )
+    assert config == plain
+    assert type(config.turns.overlap_probability) is float
+    assert type(config.voice.peak_level) is float  # not np.float64, a float subclass
+    assert type(config.sample_rate) is int
+    assert all(type(end) is int for end in config.voice.accent_spacing_syllables)
+    assert config.turns.lead_in_s == (0.3, 1.0) and type(config.turns.lead_in_s[0]) is float
+    with pytest.raises(ConfigError, match="overlap_probability must be a finite number"):
+        TurnConfig(overlap_probability=np.bool_(True))
+
+
+def test_numpy_scalars_as_duration_and_seeds_give_the_same_conversation():
+    plain = generate_conversation(3.0, 2, motion_seed=4)
+    numpy = generate_conversation(np.float32(3.0), np.int64(2), motion_seed=np.int32(4))
+    np.testing.assert_array_equal(numpy.rotations, plain.rotations)
+    assert type(numpy.conversation_seed) is int and type(numpy.motion_seed) is int
+
+
+def test_a_duration_above_the_maximum_is_refused_before_any_work():
+    with pytest.raises(ConfigError, match="longer than MAX_DURATION_S = 600 s.*several shorter"):
+        generate_conversation(MAX_DURATION_S + 1.0, 0)
+
+
+def test_a_config_that_leaves_no_room_for_speech_is_refused_naming_the_fields():
+    silent = ConversationConfig(turns=TurnConfig(lead_in_s=(20.0, 20.0)))
+    with pytest.raises(
+        ConfigError,
+        match=r"no seed can fit a phrase in duration_s = 10 s.*TurnConfig.lead_in_s = \(20.0, 20.0\)"
+        r".*TurnConfig.a_phrase_s.*at least 23.1 s",
+    ):
+        generate_conversation(10.0, 0, silent)
+    # With the default turns, 2 s fits a phrase for some seeds only: seed 1 draws none.
+    assert generate_conversation(2.0, 0).events.phrases
+    with pytest.raises(ConfigError, match="seed 1 draws no phrase.*at least 4.1 s"):
+        generate_conversation(2.0, 1)
+
+
+def test_write_dataset_refuses_sizes_that_cannot_work_before_writing(tmp_path):
+    out = tmp_path / "data"
+    with pytest.raises(
+        ConfigError, match="draws no phrase in conversation_s = 2 s.*conversation_s at least 4.1 s"
+    ):
+        write_dataset(out, 0.1, 0, conversation_s=2.0, progress=False)
+    with pytest.raises(ConfigError, match="30000 conversations, more than the 10000"):
+        write_dataset(out, 1000.0, 0, conversation_s=2.0, progress=False)
+    with pytest.raises(ConfigError, match="conversation_s = 601 s is longer than MAX_DURATION_S"):
+        write_dataset(out, 30.0, 0, conversation_s=601.0, progress=False)
+    assert not out.exists()
 
 
 # --------------------------------------------------------------------------- building blocks

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from data_synth import (
+    DatasetError,
     ensure_dataset,
     generate_conversation,
     load_conversation,
@@ -237,6 +239,114 @@ def test_a_damaged_or_incomplete_dataset_names_the_bad_file(dataset_dir, tmp_pat
         load_dataset(tmp_path / "nowhere")
     with pytest.raises(ValueError, match="split"):
         load_split(dataset_dir, "training")
+
+
+def damaged_copy(dataset_dir, tmp_path, damage):
+    """A copy of the dataset with ``damage(copy)`` applied."""
+    copy = tmp_path / "copy"
+    shutil.copytree(dataset_dir, copy)
+    damage(copy)
+    return copy
+
+
+def edit_manifest(edit):
+    def damage(copy):
+        manifest = json.loads((copy / "manifest.json").read_text())
+        edit(manifest)
+        (copy / "manifest.json").write_text(json.dumps(manifest))
+
+    return damage
+
+
+def edit_arrays(name, edit):
+    def damage(copy):
+        path = copy / "train" / "conv_0000.npz"
+        with np.load(path) as loaded:
+            arrays = dict(loaded)
+        edit(arrays[name])
+        np.savez_compressed(path, **arrays)
+
+    return damage
+
+
+def truncate(relative):
+    def damage(copy):
+        data = (copy / relative).read_bytes()
+        (copy / relative).write_bytes(data[: len(data) // 2])
+
+    return damage
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (truncate("train/conv_0000.npz"), r"conv_0000.npz is damaged or truncated"),
+        (truncate("train/conv_0000.wav"), r"conv_0000.wav is damaged .*truncated"),
+        (edit_arrays("rotations", lambda a: a.__setitem__((3, 2, 1), np.nan)), "NaN .* frame 3"),
+        (edit_arrays("positions", lambda a: a.__setitem__((7, 0, 0), np.inf)), "NaN .* frame 7"),
+        (edit_arrays("activity", lambda a: a.__setitem__(5, 7)), "code 7 at frame 5 is not one of"),
+    ],
+)
+def test_a_damaged_conversation_file_is_named_with_what_to_do(
+    dataset_dir, tmp_path, damage, message
+):
+    broken = damaged_copy(dataset_dir, tmp_path, damage)
+    with pytest.raises(DatasetError, match=message) as caught:
+        load_split(broken, "train")
+    assert "write the conversation again" in str(caught.value)
+    assert {len(v) for v in load_dataset(dataset_dir).values()} == {1}  # the original still loads
+
+
+def test_float_activity_codes_are_refused(dataset_dir, tmp_path):
+    def damage(copy):
+        path = copy / "train" / "conv_0000.npz"
+        with np.load(path) as loaded:
+            arrays = dict(loaded)
+        arrays["activity"] = arrays["activity"] + 0.5
+        np.savez_compressed(path, **arrays)
+
+    with pytest.raises(DatasetError, match="activity codes must be integers, got dtype float64"):
+        load_split(damaged_copy(dataset_dir, tmp_path, damage), "train")
+
+
+def move_to_test(manifest):
+    manifest["splits"]["test"].append(manifest["splits"]["train"][0])
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (
+            lambda m: m["splits"]["train"][0].pop("num_frames"),
+            "entry 0 of split 'train' needs 'num_frames'",
+        ),
+        (lambda m: m["splits"]["val"][0].pop("conversation_seed"), "needs 'conversation_seed'"),
+        (lambda m: m["splits"]["val"][0]["files"].update(audio=5), "audio file must be a path"),
+        (lambda m: m["splits"]["val"].__setitem__(0, "conv_0001"), "is a str, not a JSON object"),
+        (lambda m: m.__setitem__("splits", []), "'splits' must map each of"),
+        (move_to_test, "'conv_0000' .* is listed twice, in 'train' and 'test'"),
+        (
+            lambda m: m["splits"]["val"][0]["files"].update(
+                audio="../x.wav", arrays="../x.npz", metadata="../x.json"
+            ),
+            "must lie inside the folder",
+        ),
+    ],
+)
+def test_a_damaged_manifest_is_named_with_what_to_do(dataset_dir, tmp_path, edit, message):
+    broken = damaged_copy(dataset_dir, tmp_path, edit_manifest(edit))
+    with pytest.raises(DatasetError, match=message) as caught:
+        load_dataset(broken)
+    assert "manifest.json is damaged" in str(caught.value)
+    assert "--overwrite" in str(caught.value)
+
+
+def test_a_manifest_that_is_not_an_object_or_a_dataset_path_that_is_a_file(dataset_dir, tmp_path):
+    broken = damaged_copy(dataset_dir, tmp_path, lambda c: (c / "manifest.json").write_text("[]"))
+    with pytest.raises(DatasetError, match="holds a list, not a JSON object"):
+        read_manifest(broken)
+    with pytest.raises(FileNotFoundError, match="is a file, not a dataset folder"):
+        load_dataset(broken / "manifest.json")
 
 
 def test_command_line_entry_point(tmp_path):

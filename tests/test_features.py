@@ -157,6 +157,31 @@ def test_load_audio_some_infinite_samples(tmp_path):
         load_audio(path)
 
 
+@pytest.mark.parametrize("subtype", ["PCM_16", "FLOAT"])
+def test_load_audio_refuses_a_wav_file_cut_short(tmp_path, subtype):
+    path = tmp_path / "cut.wav"
+    soundfile.write(path, sine(440, 0.5, 16000), 16000, subtype=subtype)
+    whole = path.read_bytes()
+    path.write_bytes(whole[: len(whole) // 2])  # libsndfile alone would return half the samples
+    with pytest.raises(AudioError, match=r"cut.wav is truncated: .* \((49|50)%\)"):
+        load_audio(path)
+
+
+def test_load_audio_reads_a_wav_file_with_a_chunk_after_its_samples(tmp_path):
+    path = tmp_path / "tagged.wav"
+    soundfile.write(path, sine(440, 0.25, 16000), 16000, subtype="PCM_16")
+    path.write_bytes(path.read_bytes() + b"LIST\x05\x00\x00\x00hello\x00")
+    audio, _ = load_audio(path)
+    assert audio.size == 4000
+
+
+def test_load_audio_accepts_a_numpy_integer_rate(tmp_path):
+    path = tmp_path / "tone.wav"
+    soundfile.write(path, sine(440, 0.25, 22050), 22050)
+    audio, rate = load_audio(path, sample_rate=np.int64(16000))
+    assert rate == 16000 and type(rate) is int and audio.size == 4000
+
+
 # --------------------------------------------------------------------------- save_audio
 
 
@@ -395,6 +420,60 @@ def test_features_reject_non_integer_rates():
         mel_spectrogram(np.zeros(16000), -16000)
     with pytest.raises(AudioError, match="prosody needs sample_rate >= 1200"):
         prosody(np.zeros(1000), 1000)
+
+
+@pytest.mark.parametrize("extract", [mel_spectrogram, mfcc, prosody])
+@pytest.mark.parametrize(
+    ("dtype", "advice"), [(np.int16, "divide by 32768"), (np.uint8, "subtract 128, divide by 128")]
+)
+def test_features_refuse_integer_pcm(extract, dtype, advice):
+    # As floats these would be 2**15 times full scale: log-mel about 21 nats too high.
+    pcm = (sine(440, 0.2, 16000) * 100 + (128 if dtype == np.uint8 else 0)).astype(dtype)
+    with pytest.raises(AudioError, match=f"holds integers .*{advice}.*load_audio"):
+        extract(pcm, 16000)
+
+
+def test_save_audio_refuses_a_folder(tmp_path):
+    (tmp_path / "take.wav").mkdir()
+    for overwrite in (False, True):  # "already exists; pass overwrite=True" misled before
+        with pytest.raises(IsADirectoryError, match="take.wav: it is a folder"):
+            save_audio(tmp_path / "take.wav", sine(440, 0.1, 16000), 16000, overwrite=overwrite)
+
+
+def test_save_audio_refuses_integer_pcm(tmp_path):
+    with pytest.raises(AudioError, match="divide by 32768"):
+        save_audio(tmp_path / "pcm.wav", (sine(440, 0.1, 16000) * 32767).astype(np.int16), 16000)
+    assert not (tmp_path / "pcm.wav").exists()
+
+
+@pytest.mark.parametrize("scale", [32767.0, 1e20])
+def test_features_refuse_signals_far_beyond_full_scale(scale):
+    # 1e20 used to give an infinite float32 mel power; 32767 is 16-bit PCM stored as floats.
+    loud = sine(440, 0.2, 16000) * np.float32(scale)
+    for extract in (mel_spectrogram, mfcc, prosody):
+        with pytest.raises(AudioError, match="peaks at .* far beyond full scale"):
+            extract(loud, 16000)
+    with pytest.raises(AudioError, match="far beyond full scale"):
+        mel_spectrogram(sine(440, 0.2, 16000).astype(np.float64) * 1e200, 16000)
+
+
+def test_features_of_a_signal_louder_than_full_scale_but_plausible_are_finite():
+    loud = features.MAX_PEAK * sine(440, 0.2, 16000, amplitude=1.0)
+    for extract in (mel_spectrogram, mfcc, prosody):
+        assert np.isfinite(extract(loud, 16000)).all()
+
+
+def test_features_accept_numpy_integer_rates():
+    audio = sine(440, 0.3, 16000)
+    expected = mel_spectrogram(audio, 16000, fps=25, n_mels=27)
+    np.testing.assert_array_equal(
+        mel_spectrogram(audio, np.int64(16000), fps=np.int32(25), n_mels=np.int64(27)), expected
+    )
+    assert mfcc(audio, np.int64(16000), n_mfcc=np.int16(13)).shape == (7, 13)
+    assert prosody(audio, np.int64(16000), fps=np.int64(25)).shape == (7, 4)
+    assert num_frames(np.int64(4800), np.int32(16000), np.int64(25)) == 7
+    with pytest.raises(ValueError, match="n_samples must be an integer, got 4800.5"):
+        num_frames(4800.5, 16000)
 
 
 # --------------------------------------------------------------------------- speech activity

@@ -3,6 +3,7 @@ import pytest
 import torch
 
 from gesturelib.rotations import (
+    RotationError,
     axis_angle_to_matrix,
     geodesic_angle,
     matrix_to_rot6d,
@@ -108,3 +109,99 @@ def test_axis_angle_quarter_turn_about_y():
 def test_wrong_shapes_are_rejected_with_the_expected_shape(function, bad_shape, expected):
     with pytest.raises(ValueError, match=expected):
         function(np.zeros(bad_shape))
+
+
+# --------------------------------------------------------------------------- input kinds
+
+
+def test_integers_and_lists_give_floats_of_the_kind_given():
+    identity6d = [1, 0, 0, 0, 1, 0]
+    for given in (np.array(identity6d), identity6d):
+        matrix = rot6d_to_matrix(given)
+        assert isinstance(matrix, np.ndarray) and matrix.dtype == np.float64
+        np.testing.assert_array_equal(matrix, np.eye(3))
+    from_tensor = rot6d_to_matrix(torch.tensor(identity6d))
+    assert isinstance(from_tensor, torch.Tensor) and from_tensor.dtype == torch.get_default_dtype()
+    assert matrix_to_rot6d(np.eye(3, dtype=int)).dtype == np.float64
+    np.testing.assert_allclose(
+        axis_angle_to_matrix([0, 1, 0], 1), axis_angle_to_matrix(np.array([0.0, 1.0, 0.0]), 1.0)
+    )
+
+
+def test_mixed_inputs_are_promoted_and_a_tensor_among_them_gives_a_tensor():
+    arc = shortest_arc(np.ones(3, np.float32), np.array([1.0, 0.0, 0.0]))
+    assert isinstance(arc, np.ndarray) and arc.dtype == np.float64
+    target = torch.tensor([1.0, 0.0, 0.0], requires_grad=True)
+    arc = shortest_arc(np.ones(3), target)  # numpy float64 and a float32 tensor
+    assert isinstance(arc, torch.Tensor) and arc.dtype == torch.float64
+    arc.sum().backward()
+    assert target.grad is not None
+    assert geodesic_angle(np.eye(3, dtype=np.float32), np.eye(3)).dtype == np.float64
+
+
+@pytest.mark.parametrize(
+    "bad", [np.array(list("abcdef")), np.zeros(6, dtype=complex), [[1.0, 2.0], [3.0]]]
+)
+def test_non_real_inputs_raise_a_type_error_naming_the_argument(bad):
+    with pytest.raises(TypeError, match="rot6d must"):
+        rot6d_to_matrix(bad)
+
+
+# --------------------------------------------------------------------------- what is no rotation
+
+
+@pytest.mark.parametrize(
+    ("matrix", "message"),
+    [
+        (2 * np.eye(3), "differs from the identity by 3 and its determinant is 8"),
+        (np.diag([-1.0, 1.0, 1.0]), "determinant is -1"),
+        (np.arange(9.0).reshape(3, 3), "not a rotation"),
+        (np.full((3, 3), np.nan), "holds NaN"),
+    ],
+)
+def test_matrix_to_rot6d_refuses_matrices_that_are_not_rotations(matrix, message):
+    batch = np.stack([np.eye(3), np.eye(3), matrix])  # the third is named
+    with pytest.raises(RotationError, match=rf"matrix\[2\] .*{message}") as caught:
+        matrix_to_rot6d(batch)
+    assert caught.value.index == (2,)
+    with pytest.raises(RotationError, match="not a rotation|NaN"):
+        geodesic_angle(np.eye(3), matrix)
+
+
+def test_matrix_to_rot6d_accepts_float32_round_off():
+    rotations = random_rotations(50).astype(np.float32)
+    noisy = rotations + np.float32(1e-5) * np.random.default_rng(7).standard_normal((50, 3, 3))
+    np.testing.assert_allclose(matrix_to_rot6d(noisy), noisy[:, :2].reshape(50, 6))
+
+
+@pytest.mark.parametrize(
+    ("rot6d", "dtype"),
+    [
+        ([0.0, 0, 0, 0, 0, 0], np.float64),
+        ([1.0, 2, 3, 2, 4, 6], np.float64),
+        ([1.0, 2, 3, 2, 4, 6], np.float32),
+        ([0.3, -0.2, 0.7, 0.09, -0.06, 0.21], np.float32),  # parallel up to float32 round-off
+        ([0.0, 0, 0, 1, 0, 0], np.float64),
+        ([1.0, 0, 0, 0, 0, 0], np.float64),
+    ],
+)
+def test_zero_or_parallel_6d_vectors_are_refused(rot6d, dtype):
+    batch = np.array([[1.0, 0, 0, 0, 1, 0], rot6d], dtype=dtype)
+    for function in (rot6d_to_matrix, normalize_rot6d):
+        with pytest.raises(RotationError, match=r"rot6d\[1\] = .* zero or parallel"):
+            function(batch)
+
+
+def test_nan_6d_vectors_are_refused_and_tiny_ones_are_exact():
+    with pytest.raises(RotationError, match="rot6d holds NaN"):
+        rot6d_to_matrix(np.full(6, np.nan))
+    # Not parallel, only small: Gram-Schmidt still has two directions (it used to return
+    # rows of length 1e-12 here).
+    np.testing.assert_allclose(rot6d_to_matrix(1e-20 * np.array([1.0, 0, 0, 0, 1, 0])), np.eye(3))
+
+
+def test_zero_directions_are_refused():
+    with pytest.raises(RotationError, match=r"target\[1\] is a zero vector"):
+        shortest_arc(np.ones(3), np.array([[1.0, 0, 0], [0, 0, 0]]))
+    with pytest.raises(RotationError, match="axis is a zero vector"):
+        axis_angle_to_matrix(np.zeros(3), 0.5)

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 import torch
 
+from gesturelib.rotations import RotationError
 from gesturelib.skeleton import (
     BONE_LENGTHS,
     JOINT_INDEX,
@@ -134,3 +135,43 @@ def test_wrong_shapes_are_rejected(function, shape, message):
 def test_wrong_offsets_are_rejected():
     with pytest.raises(ValueError, match=r"offsets must have shape \(9, 3\)"):
         forward_kinematics(np.zeros((9, 6)), np.zeros((8, 3)))
+
+
+def test_a_limb_without_a_rotation_is_named_with_its_frame():
+    rot6d = np.tile(identity_rot6d(), (4, NUM_JOINTS, 1))
+    rot6d[2, JOINT_INDEX["right_elbow"]] = [1.0, 0.0, 0.0, 2.0, 0.0, 0.0]  # parallel halves
+    with pytest.raises(RotationError, match="limb 'right_elbow' at index 2: .* zero or parallel"):
+        forward_kinematics(rot6d)
+    with pytest.raises(RotationError, match="limb 'sternum': "):
+        forward_kinematics(np.zeros((NUM_JOINTS, 6)))  # all keypoints at the origin before
+
+
+def test_a_zero_length_limb_has_no_rotation():
+    positions = np.stack([t_pose()] * 3)
+    positions[1, JOINT_INDEX["left_wrist"]] = positions[1, JOINT_INDEX["left_elbow"]]
+    with pytest.raises(RotationError, match="limb 'left_wrist' at index 1: .* zero vector"):
+        rotations_from_positions(positions)
+
+
+def test_lists_and_integers_give_floats_like_arrays(random_rot6d):
+    identity = np.tile(identity_rot6d(), (NUM_JOINTS, 1))
+    np.testing.assert_array_equal(forward_kinematics(identity.tolist()), t_pose())
+    assert forward_kinematics(identity.astype(int)).dtype == np.float64
+    np.testing.assert_allclose(rotations_from_positions(t_pose().tolist()), identity, atol=1e-12)
+    assert mirror_rotations(identity.astype(int)).dtype == np.float64
+    assert mirror_positions(t_pose().round().astype(int)).dtype == np.float64
+    np.testing.assert_allclose(bone_lengths(t_pose().tolist()), BONE_LENGTHS)
+    from_tensor = forward_kinematics(
+        torch.tensor(identity, dtype=torch.float32), T_POSE_OFFSETS.tolist()
+    )
+    assert isinstance(from_tensor, torch.Tensor) and from_tensor.dtype == torch.float32
+
+
+def test_offsets_without_a_length_are_refused():
+    offsets = T_POSE_OFFSETS.copy()
+    offsets[JOINT_INDEX["nose"]] = 0.0
+    offsets[JOINT_INDEX["head"], 1] = np.nan
+    with pytest.raises(
+        ValueError, match=r"offsets of \['head', 'nose'\] are zero, NaN or infinite"
+    ):
+        t_pose(offsets)
