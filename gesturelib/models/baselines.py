@@ -2,8 +2,9 @@
 
 Both map the speech around a frame to *one* pose, trained on the mean squared error. Under MSE the
 best prediction is the conditional mean ``E[x | speech]``: where speech allows many gestures, the
-regressor averages them, so its motion is smaller and slower than real motion ("regression to the
-mean"). The probabilistic models of the course exist to avoid exactly that.
+regressor averages them ("regression to the mean"): its gestures are smaller than real ones, and
+an average of strokes and holds neither strikes fast nor holds still (notebook 03 measures it at
+the wrists). The probabilistic models of the course exist to avoid exactly that.
 
 Aud2Pose (Hasegawa et al. 2018, as used by Kucherenko et al.)
 -------------------------------------------------------------
