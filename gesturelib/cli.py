@@ -1,35 +1,282 @@
 """Command line: ``python -m gesturelib <command>`` (also installed as ``gesturelib``).
 
-Commands:
-    demo   generate a short synthetic conversation and render the agent with its speech into a
-           folder a person can open (a video with sound, pictures, the raw files).
+Commands (``docs/architecture.md`` has the contract they share):
+    train MODEL --out RUN     train a model of the course into a run folder
+    generate RUN --audio WAV | --conversation STEM --out DIR
+                              the agent's motion for a recording: motion.npz and agent.mp4
+    info RUN                  what a run folder holds
+    demo                      generate a conversation and render it into a folder
+
+An error the user can fix is reported in one line on stderr, with exit status 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import shutil
 import sys
+import time
 from pathlib import Path
 
-#: Written into every folder the demo fills, so that a second run may replace what the first made
-#: but never files a person put there.
-DEMO_MARKER = ".gesturelib-demo"
+#: Written into every folder a command fills, so that a second run may replace what the first
+#: made but never files a person put there.
+OUTPUT_MARKER = ".gesturelib-output"
+#: What ``train`` writes into a run folder (``--overwrite`` removes only these).
+RUN_FILES = ("best.pt", "last.pt", "run.json", "autoencoder")
 
 
 class CommandError(Exception):
     """A problem the user can fix; reported as one line, without a traceback."""
 
 
-def _prepare_output_folder(out: Path, overwrite: bool) -> None:
+def _output_folder(out: Path, overwrite: bool, command: str) -> None:
+    """Make ``out`` ready for ``command``'s files; refuse one holding files it did not write."""
     if out.exists() and not out.is_dir():
         raise CommandError(f"{out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / DEMO_MARKER).exists() and not overwrite:
+    if out.is_dir() and any(out.iterdir()) and not (out / OUTPUT_MARKER).exists() and not overwrite:
         raise CommandError(
-            f"{out} already holds files that the demo did not make; choose another --out "
+            f"{out} already holds files that `{command}` did not make; choose another --out "
             "or pass --overwrite to write into it anyway"
         )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / DEMO_MARKER).write_text("This folder was written by `python -m gesturelib demo`.\n")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / OUTPUT_MARKER).write_text(
+            f"This folder was written by `python -m gesturelib {command}`.\n"
+        )
+    except OSError as error:
+        raise CommandError(f"cannot write into {out}: {error.strerror or error}") from error
+
+
+# ---------------------------------------------------------------------------------------------
+# train
+# ---------------------------------------------------------------------------------------------
+
+
+def run_train(args) -> Path:
+    """Train ``args.model`` into the run folder ``args.out``; return the folder."""
+    import torch
+
+    from data_synth import ensure_dataset, load_dataset
+    from data_synth.dataset import (
+        FULL_CONVERSATION_S,
+        FULL_MINUTES,
+        QUICK_CONVERSATION_S,
+        QUICK_MINUTES,
+    )
+    from gesturelib.checkpoints import FORMAT, VERSION
+    from gesturelib.recipes import RECIPES
+    from gesturelib.runtime import data_folder, quick_mode
+    from gesturelib.train import train
+
+    quick = args.quick or quick_mode()
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CommandError(f"--out {out} is a file, not a folder")
+    held = [p.name for p in out.iterdir()] if out.is_dir() else []
+    if held and not (args.resume or args.overwrite):
+        raise CommandError(
+            f"{out} is not empty; pass --resume to continue the run in it, --overwrite to replace "
+            "it, or choose another --out"
+        )
+    if args.resume and not (out / "last.pt").exists():
+        raise CommandError(f"{out} holds no run to resume (no last.pt)")
+    if args.overwrite:
+        for name in RUN_FILES:
+            path = out / name
+            shutil.rmtree(path) if path.is_dir() else path.unlink(missing_ok=True)
+    if args.data is None:
+        data = data_folder(quick)
+        minutes, seconds = (
+            (QUICK_MINUTES, QUICK_CONVERSATION_S) if quick else (FULL_MINUTES, FULL_CONVERSATION_S)
+        )
+        ensure_dataset(data, minutes=minutes, seed=0, conversation_s=seconds)
+    else:
+        data = Path(args.data)
+    splits = load_dataset(data)
+    torch.set_num_threads(args.threads)
+
+    recipe = RECIPES[args.model]
+    inner = None
+    if recipe.stage_one is not None:  # e.g. the autoencoder of aud2repr2pose, in a subfolder
+        print(f"Stage 1: {recipe.stage_one}")
+        inner = _fit(
+            RECIPES[recipe.stage_one], splits, quick, args, out / "autoencoder", None, train
+        )[0]
+    started = time.perf_counter()
+    model, history, normaliser = _fit(recipe, splits, quick, args, out, inner, train)
+    summary = {
+        "format": FORMAT,
+        "version": VERSION,
+        "model": args.model,
+        "model_class": type(model).__name__,
+        "quick": quick,
+        "data": str(data),
+        "seed": args.seed,
+        "epochs": history.epochs,
+        "best_epoch": history.best_epoch,
+        "training_seconds": round(sum(history.epoch_seconds), 1),
+        "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
+    }
+    (out / "run.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"Trained {args.model} in {time.perf_counter() - started:.0f} s; run folder {out}/")
+    return out
+
+
+def _fit(recipe, splits, quick: bool, args, folder: Path, inner, train):
+    from gesturelib.data import make_datasets
+
+    windows, config, train_config = recipe.settings(quick, seed=args.seed, device=args.device)
+    datasets, normaliser = make_datasets(splits, windows)
+    model = recipe.make(config, normaliser, inner)
+    history = train(
+        model,
+        datasets["train"],
+        datasets["val"],
+        train_config,
+        folder,
+        normaliser=normaliser,
+        overwrite=args.overwrite,
+    )
+    return model, history, normaliser
+
+
+# ---------------------------------------------------------------------------------------------
+# generate, info
+# ---------------------------------------------------------------------------------------------
+
+
+def load_run(folder: Path, device: str = "cpu"):
+    """``(model, normaliser, checkpoint)`` of a run folder's ``best.pt``."""
+    from gesturelib.checkpoints import load_model, read_checkpoint
+    from gesturelib.data import Normaliser
+    from gesturelib.recipes import MODEL_CLASSES
+
+    path = Path(folder) / "best.pt"
+    if not Path(folder).is_dir():
+        raise CommandError(f"{folder} is not a run folder (no such folder)")
+    checkpoint = read_checkpoint(path, kind="best")
+    name = checkpoint["model_class"]
+    if name not in MODEL_CLASSES:
+        raise CommandError(f"{path} holds a {name!r}, which this version cannot load")
+    model = load_model(path, MODEL_CLASSES[name], device)
+    if checkpoint["normaliser"] is None:
+        raise CommandError(f"{path} has no normalisation statistics; retrain it with `train`")
+    return model, Normaliser.from_dict(checkpoint["normaliser"]), checkpoint
+
+
+def run_generate(args) -> list[Path]:
+    """Generate motion for a recording with a trained run; return the files written."""
+    import numpy as np
+
+    from data_synth import load_conversation
+    from gesturelib.conventions import FPS, Activity
+    from gesturelib.features import load_audio, mel_spectrogram, num_frames, voice_activity
+    from gesturelib.sampling import generate
+    from gesturelib.skeleton import forward_kinematics
+
+    model, normaliser, _ = load_run(Path(args.run), args.device)
+    if not hasattr(model, "step"):
+        raise CommandError(
+            f"{args.run} holds a {type(model).__name__}, which does not generate motion"
+        )
+    if args.audio is not None:
+        audio, sample_rate = load_audio(args.audio)
+        if num_frames(len(audio), sample_rate, FPS) < 1:
+            raise CommandError(f"{args.audio} is shorter than one frame ({1000 // FPS} ms)")
+        activity = np.where(voice_activity(audio, sample_rate), Activity.A_SPEAKS, Activity.NONE)
+    else:
+        conversation = load_conversation(args.conversation)  # its motion is never read
+        audio, sample_rate, activity = (
+            conversation.audio,
+            conversation.sample_rate,
+            conversation.activity,
+        )
+    style = None
+    if args.style:
+        if not getattr(model.config, "style", False):
+            raise CommandError(f"{args.run} was trained without style control; drop --style")
+        style = normaliser.style_at_percentiles(_parse_style(args.style))
+    speech = mel_spectrogram(audio, sample_rate)
+    rotations = generate(
+        model,
+        normaliser,
+        speech,
+        activity,
+        samples=args.samples,
+        temperature=args.temperature,
+        seed=args.seed,
+        style=style,
+    )
+    out = Path(args.out)
+    _output_folder(out, args.overwrite, "generate")
+    written = []
+    for number, sample in enumerate(rotations, start=1):
+        folder = out if args.samples == 1 else out / f"sample-{number}"
+        folder.mkdir(exist_ok=True)
+        positions = forward_kinematics(sample)
+        np.savez(
+            folder / "motion.npz",
+            rotations=sample.astype(np.float32),
+            positions=positions.astype(np.float32),
+            activity=np.asarray(activity, dtype=np.int64),
+            fps=np.int64(FPS),
+        )
+        written.append(folder / "motion.npz")
+        if not args.no_video:
+            written.append(_render(positions, audio, sample_rate, folder / "agent.mp4"))
+    return written
+
+
+def _parse_style(pairs: list[str]) -> dict[str, float]:
+    parsed = {}
+    for pair in pairs:
+        name, _, value = pair.partition("=")
+        try:
+            parsed[name] = float(value)
+        except ValueError:
+            raise CommandError(
+                f"--style takes NAME=PERCENTILE, e.g. hand_height=85; got {pair!r}"
+            ) from None
+    return parsed
+
+
+def _render(positions, audio, sample_rate: int, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from gesturelib import viz
+
+    animation = viz.animate(positions, titles=["the agent"])
+    return viz.save_animation(animation, path, audio=audio, sample_rate=sample_rate, overwrite=True)
+
+
+def run_info(args) -> str:
+    """A description of a run folder."""
+    from gesturelib.history import History
+
+    model, _, checkpoint = load_run(Path(args.run))
+    history = History.from_dict(checkpoint["history"])
+    parameters = sum(p.numel() for p in model.parameters())
+    size = sum(p.stat().st_size for p in Path(args.run).rglob("*") if p.is_file())
+    summary_path = Path(args.run) / "run.json"
+    summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    lines = [
+        f"run folder      {args.run}",
+        f"model           {checkpoint['model_class']} ({parameters:,} parameters)",
+        f"model config    {json.dumps(checkpoint['model_config'])}",
+        f"training config {json.dumps(checkpoint['train_config'])}",
+        f"data            {summary.get('data', '(unknown)')} (fingerprint {checkpoint['data']})",
+        f"training        {history.epochs} epochs in {sum(history.epoch_seconds):.0f} s, best "
+        f"epoch {history.best_epoch} (validation loss {checkpoint['score']:.4g})",
+        f"size on disk    {size / 1e6:.1f} MB",
+    ]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# demo
+# ---------------------------------------------------------------------------------------------
 
 
 def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> list[Path]:
@@ -45,7 +292,7 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
 
     if seconds <= 0:
         raise CommandError(f"--seconds must be positive, got {seconds}")
-    _prepare_output_folder(out, overwrite)
+    _output_folder(out, overwrite, "demo")
     print(f"Generating a {seconds:g} s conversation (seed {seed}) ...")
     conversation = generate_conversation(seconds, seed=seed)
     written = save_conversation(conversation, out / "conversation", overwrite=True)
@@ -61,7 +308,6 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
             overwrite=True,
         )
     )
-
     mel = mel_spectrogram(conversation.audio, conversation.sample_rate, fps=conversation.fps)
     figure = viz.plot_timeline(
         mel,
@@ -72,7 +318,6 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
     written.append(out / "timeline.png")
     figure.savefig(written[-1], dpi=120)
     plt.close(figure)
-
     # One pose a second, overlaid, as in the Flow-VAE paper's figures.
     figure = viz.plot_pose(
         conversation.positions[:: int(conversation.fps)], title="The agent's poses, one a second"
@@ -83,26 +328,85 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
     return [Path(p) for p in written]
 
 
-def main(argv: list[str] | None = None) -> int:
+# ---------------------------------------------------------------------------------------------
+# the parser
+# ---------------------------------------------------------------------------------------------
+
+
+def _parser() -> argparse.ArgumentParser:
+    from gesturelib.recipes import RECIPES
+
     parser = argparse.ArgumentParser(prog="gesturelib", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
+
+    train = commands.add_parser("train", help="train a model into a run folder")
+    train.add_argument("model", choices=sorted(RECIPES), help="which model")
+    train.add_argument("--out", required=True, type=Path, help="the run folder")
+    train.add_argument("--quick", action="store_true", help="quick configs and quick data")
+    train.add_argument("--data", type=Path, help="a dataset folder (default: the synthetic one)")
+    train.add_argument("--seed", type=int, default=0, help="seeds the weights and the training")
+    again = train.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true", help="continue the run in --out")
+    again.add_argument("--overwrite", action="store_true", help="replace the run in --out")
+    train.add_argument("--device", default="cpu", help="cpu or cuda")
+    train.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+
+    generate = commands.add_parser("generate", help="the agent's motion for a recording")
+    generate.add_argument("run", type=Path, help="a run folder")
+    source = generate.add_mutually_exclusive_group(required=True)
+    source.add_argument("--audio", type=Path, help="a recording of the agent's speech")
+    source.add_argument("--conversation", type=Path, help="a conversation's path stem")
+    generate.add_argument("--out", required=True, type=Path, help="the output folder")
+    generate.add_argument("--seed", type=int, default=0)
+    generate.add_argument("--temperature", type=float, help="default: the model's own")
+    generate.add_argument("--samples", type=int, default=1, help="how many motions to draw")
+    generate.add_argument(
+        "--style", nargs="+", metavar="NAME=PERCENTILE", help="e.g. hand_height=85"
+    )
+    generate.add_argument("--no-video", action="store_true", help="write motion.npz only")
+    generate.add_argument(
+        "--overwrite", action="store_true", help="write into a folder of others' files"
+    )
+    generate.add_argument("--device", default="cpu")
+
+    info = commands.add_parser("info", help="what a run folder holds")
+    info.add_argument("run", type=Path)
+
     demo = commands.add_parser("demo", help="render a synthetic conversation into a folder")
     demo.add_argument("--out", type=Path, default=Path("outputs/demo"), help="output folder")
     demo.add_argument("--seconds", type=float, default=20.0, help="length of the conversation")
     demo.add_argument("--seed", type=int, default=0, help="seed of the conversation")
     demo.add_argument(
-        "--overwrite", action="store_true", help="write into a folder that holds other files"
+        "--overwrite", action="store_true", help="write into a folder of others' files"
     )
-    args = parser.parse_args(argv)
+    return parser
 
+
+def main(argv: list[str] | None = None) -> int:
+    from gesturelib.checkpoints import CheckpointError
+
+    args = _parser().parse_args(argv)
     try:
-        if args.command == "demo":
+        if args.command == "train":
+            run_train(args)
+        elif args.command == "generate":
+            files = run_generate(args)
+            print(
+                f"Wrote {len(files)} files to {args.out}/: "
+                + ", ".join(str(f.relative_to(args.out)) for f in files)
+            )
+        elif args.command == "info":
+            print(run_info(args))
+        else:
             files = run_demo(args.out, args.seconds, args.seed, args.overwrite)
             print(f"\nWrote {len(files)} files to {args.out}/:")
             for path in files:
                 print(f"  {path.name}")
             print("Open agent.mp4 to watch and hear the agent.")
-    except (CommandError, FileExistsError, FileNotFoundError, ValueError) as error:
-        print(f"gesturelib {args.command}: error: {error}", file=sys.stderr)
+    except (CommandError, CheckpointError, OSError, ValueError) as error:
+        # One line: the message's first line, and its first detail if it lists some.
+        lines = [line.strip() for line in str(error).strip().splitlines()] or [type(error).__name__]
+        message = lines[0] + (f" {lines[1]}" if lines[0].endswith(":") and len(lines) > 1 else "")
+        print(f"gesturelib {args.command}: error: {message}", file=sys.stderr)
         return 2
     return 0

@@ -62,18 +62,20 @@ def check_fields(
             value = getattr(config, name)
             if not (_is_int(value) and value >= minimum):
                 fail(name, f"an integer >= {minimum}")
+            object.__setattr__(config, name, int(value))  # np.int64(5) -> 5, for JSON
     for name in sizes:
         value = getattr(config, name)
         if not (isinstance(value, tuple) and all(_is_int(v) and v >= 1 for v in value)):
             fail(name, "a tuple of integers >= 1")
-    for name in fractions:
-        value = getattr(config, name)
-        if not (_is_number(value) and 0 <= value < 1):
-            fail(name, "a number in [0, 1)")
-    for name in non_negative:
-        value = getattr(config, name)
-        if not (_is_number(value) and value >= 0):
-            fail(name, "a finite number >= 0")
+    for names, bounds in (
+        (fractions, "a number in [0, 1)"),
+        (non_negative, "a finite number >= 0"),
+    ):
+        for name in names:
+            value = getattr(config, name)
+            if not (_is_number(value) and 0 <= value < (1 if names is fractions else math.inf)):
+                fail(name, bounds)
+            object.__setattr__(config, name, float(value))
     for name in flags:
         if not isinstance(getattr(config, name), bool):
             fail(name, "True or False")

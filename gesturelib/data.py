@@ -6,12 +6,12 @@ For a frame ``t`` the papers' models get a *control signal* and predict the pose
   Flow-VAE paper), the autoregressive context;
 * ``speech``: log-mel rows ``t - past .. t + future`` (5 past and 25 future frames: 1 s of
   look-ahead, because gestures *anticipate* the speech they go with);
-* ``activity``: the who-is-talking one-hot over the same window.
+* ``activity``: the who-is-talking one-hot over the same window;
+* ``style``: MoGlow's style inputs, measured from the motion itself (:mod:`gesturelib.style`).
 
-Items are dictionaries of named parts, so that a model takes what it needs and later parts (such
-as MoGlow's style inputs) can be added without changing any model. An item covers
-``sequence_length`` consecutive target frames (1 for frame-wise models, e.g. 80 for the 4 s
-excerpts MoGlow trains on), and every part has that leading axis ``L``:
+Items are dictionaries of named parts, so that a model takes what it needs and ignores the rest.
+An item covers ``sequence_length`` consecutive target frames (1 for frame-wise models, e.g. 100
+for the 4 s excerpts MoGlow trains on), and every part has that leading axis ``L``:
 
 =============  ===================================  ==========================================
 part           shape                                meaning
@@ -20,12 +20,13 @@ part           shape                                meaning
 ``past_pose``  ``(L, tau, 54)``                     x_{t-tau} .. x_{t-1} for each target frame
 ``speech``     ``(L, past + 1 + future, 27)``       log-mel window around each target frame
 ``activity``   ``(L, past + 1 + future, 4)``        activity one-hot over the same window
+``style``      ``(L, 4)``                           style of each target frame (normalised)
 =============  ===================================  ==========================================
 
 A ``DataLoader`` adds the batch axis in front: ``(B, L, ...)``. Only windows whose whole context
 lies inside the conversation are used, so no padding value is ever learned.
 
-Poses and speech features are standardised with statistics fitted on the *training* split only
+Poses, speech and style are standardised with statistics fitted on the *training* split only
 (:class:`Normaliser`); mirroring (left-right, :func:`gesturelib.skeleton.mirror_rotations`) doubles
 the training data with the control signal duplicated, as in the Flow-VAE paper.
 
@@ -37,10 +38,9 @@ is not a list of features; past that, the windowing trusts its inputs.
 from __future__ import annotations
 
 import json
-import numbers
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Protocol
 
@@ -48,9 +48,11 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from gesturelib.configs import SpeechContext, check_fields
 from gesturelib.conventions import FPS, N_MELS, NUM_ACTIVITIES
 from gesturelib.features import activity_one_hot, mel_spectrogram
-from gesturelib.skeleton import NUM_JOINTS, POSE_DIM, mirror_rotations
+from gesturelib.skeleton import NUM_JOINTS, POSE_DIM, forward_kinematics, mirror_rotations
+from gesturelib.style import STYLE_FEATURES, style_features
 
 #: Standard deviations below this are treated as this, so a (nearly) constant feature is
 #: centred but not blown up.
@@ -68,46 +70,24 @@ class ConversationLike(Protocol):
 
 
 @dataclass(frozen=True)
-class WindowConfig:
+class WindowConfig(SpeechContext):
     """How much context each training window carries.
 
     Attributes:
+        speech_past, speech_future: the speech and activity window around each target frame
+            (:class:`~gesturelib.configs.SpeechContext`: 5 and 25 frames, 1 s of look-ahead).
         past_poses: tau, the number of previous poses in the control signal.
-        speech_past: log-mel / activity frames before the target frame.
-        speech_future: log-mel / activity frames after it (25 at 25 fps = 1 s of look-ahead).
         sequence_length: consecutive target frames per item (1 for frame-wise models).
         stride: frames between the starts of consecutive items.
     """
 
     past_poses: int = 5
-    speech_past: int = 5
-    speech_future: int = 25
     sequence_length: int = 1
     stride: int = 1
 
     def __post_init__(self):
-        for name, smallest in (
-            ("past_poses", 0),
-            ("speech_past", 0),
-            ("speech_future", 0),
-            ("sequence_length", 1),
-            ("stride", 1),
-        ):
-            value = getattr(self, name)
-            if (
-                isinstance(value, (bool, np.bool_))
-                or not isinstance(value, numbers.Integral)
-                or value < smallest
-            ):
-                raise ValueError(
-                    f"WindowConfig.{name} must be an integer >= {smallest}, got {value!r}"
-                )
-            object.__setattr__(self, name, int(value))  # np.int64(5) -> 5
-
-    @property
-    def speech_window(self) -> int:
-        """Frames in a speech or activity window: past + the target frame + future."""
-        return self.speech_past + 1 + self.speech_future
+        super().__post_init__()
+        check_fields(self, counts=("past_poses",), positive=("sequence_length", "stride"))
 
     @property
     def frames_needed(self) -> int:
@@ -123,6 +103,7 @@ class ConversationFeatures:
         pose: ``(T, 54)`` limb rotations, 6D, flattened joint-major.
         speech: ``(T, n_mels)`` log-mel (27 bands by default).
         activity: ``(T, 4)`` one-hot.
+        style: ``(T, 4)`` the style measured from the motion (:mod:`gesturelib.style`).
 
     Raises:
         ValueError: when built with wrong shapes, arrays of different lengths, or NaN or
@@ -132,10 +113,12 @@ class ConversationFeatures:
     pose: np.ndarray
     speech: np.ndarray
     activity: np.ndarray
+    style: np.ndarray
 
     def __post_init__(self):
         lengths = {}
-        for name, width in (("pose", POSE_DIM), ("speech", None), ("activity", NUM_ACTIVITIES)):
+        parts = (("pose", POSE_DIM), ("speech", None), ("activity", NUM_ACTIVITIES))
+        for name, width in (*parts, ("style", len(STYLE_FEATURES))):
             array = np.asarray(getattr(self, name))
             if (
                 array.dtype.kind not in "biuf"
@@ -157,8 +140,9 @@ class ConversationFeatures:
         if len(set(lengths.values())) != 1:
             raise ValueError(
                 f"ConversationFeatures arrays disagree in length: {lengths['pose']} pose frames, "
-                f"{lengths['speech']} speech frames, {lengths['activity']} activity frames (a "
-                "conversation's rotations, audio and activity must cover the same frames)"
+                f"{lengths['speech']} speech frames, {lengths['activity']} activity frames, "
+                f"{lengths['style']} style frames (a conversation's rotations, audio and "
+                "activity must cover the same frames)"
             )
 
     @classmethod
@@ -196,46 +180,65 @@ class ConversationFeatures:
         )
         activity = activity_one_hot(np.asarray(conversation.activity))
         return cls(
-            pose=rotations.reshape(len(rotations), POSE_DIM), speech=speech, activity=activity
+            pose=rotations.reshape(len(rotations), POSE_DIM),
+            speech=speech,
+            activity=activity,
+            style=_style_of(rotations),
         )
 
     def mirrored(self) -> ConversationFeatures:
-        """The left-right mirror image of the motion, with the same speech and activity."""
-        rotations = self.pose.reshape(-1, NUM_JOINTS, 6)
+        """The left-right mirror image of the motion, with the same speech and activity, and the
+        style measured again from the mirrored motion (the hand height is the right hand's)."""
+        rotations = mirror_rotations(self.pose.reshape(-1, NUM_JOINTS, 6))
         return ConversationFeatures(
-            pose=mirror_rotations(rotations).reshape(-1, POSE_DIM),
+            pose=rotations.reshape(-1, POSE_DIM),
             speech=self.speech,
             activity=self.activity,
+            style=_style_of(rotations),
         )
+
+
+def _style_of(rotations: np.ndarray) -> np.ndarray:
+    """The style ``(T, 4)`` of limb rotations ``(T, 9, 6)``, measured on their keypoints."""
+    return style_features(forward_kinematics(rotations.astype(np.float64))).astype(np.float32)
 
 
 @dataclass(frozen=True)
 class Normaliser:
-    """Per-dimension standardisation of poses and speech features, fitted on training data.
+    """Per-dimension standardisation of poses, speech and style, fitted on training data.
 
-    ``normalised = (value - mean) / std``. Saved and loaded as JSON so that a checkpoint carries
-    the statistics its model was trained with.
+    ``normalised = (value - mean) / std``. It also keeps the percentiles of the training style
+    (``style_percentiles[p, i]``: the ``p``-th percentile of feature ``i``, ``p`` = 0..100), the
+    values style control asks for. Saved and loaded as JSON so that a checkpoint carries the
+    statistics its model was trained with.
     """
 
     pose_mean: np.ndarray  # (54,)
     pose_std: np.ndarray  # (54,)
     speech_mean: np.ndarray  # (n_mels,)
     speech_std: np.ndarray  # (n_mels,)
+    style_mean: np.ndarray  # (4,)
+    style_std: np.ndarray  # (4,)
+    style_percentiles: np.ndarray  # (101, 4)
 
     def __post_init__(self):
-        n_mels = np.size(self.speech_mean)
+        n_mels, n_style = np.size(self.speech_mean), len(STYLE_FEATURES)
         for name, dim in (
             ("pose_mean", POSE_DIM),
             ("pose_std", POSE_DIM),
             ("speech_mean", n_mels),
             ("speech_std", n_mels),
+            ("style_mean", n_style),
+            ("style_std", n_style),
+            ("style_percentiles", (101, n_style)),
         ):
             try:
                 value = np.asarray(getattr(self, name), dtype=np.float32)
             except (TypeError, ValueError) as error:
                 raise ValueError(f"Normaliser.{name} must be a list of numbers: {error}") from error
-            if value.shape != (dim,) or dim == 0:
-                raise ValueError(f"Normaliser.{name} must have shape ({dim},), got {value.shape}")
+            shape = dim if isinstance(dim, tuple) else (dim,)
+            if value.shape != shape or dim == 0:
+                raise ValueError(f"Normaliser.{name} must have shape {shape}, got {value.shape}")
             is_std = name.endswith("std")
             usable = np.isfinite(value) & (value > 0 if is_std else True)
             if not usable.all():
@@ -256,13 +259,18 @@ class Normaliser:
             raise ValueError(
                 f"features mix speech of {bands} mel bands; compute all with one n_mels"
             )
-        pose = np.concatenate([f.pose for f in features]).astype(np.float64)
-        speech = np.concatenate([f.speech for f in features]).astype(np.float64)
+        pose, speech, style = (
+            np.concatenate([getattr(f, part) for f in features]).astype(np.float64)
+            for part in ("pose", "speech", "style")
+        )
         return cls(
-            pose_mean=pose.mean(0).astype(np.float32),
-            pose_std=np.maximum(pose.std(0), MIN_STD).astype(np.float32),
-            speech_mean=speech.mean(0).astype(np.float32),
-            speech_std=np.maximum(speech.std(0), MIN_STD).astype(np.float32),
+            pose_mean=pose.mean(0),
+            pose_std=np.maximum(pose.std(0), MIN_STD),
+            speech_mean=speech.mean(0),
+            speech_std=np.maximum(speech.std(0), MIN_STD),
+            style_mean=style.mean(0),
+            style_std=np.maximum(style.std(0), MIN_STD),
+            style_percentiles=np.percentile(style, np.arange(101), axis=0),
         )
 
     def normalise_pose(self, pose):
@@ -280,6 +288,26 @@ class Normaliser:
         _check_last_dim(speech, len(self.speech_mean), "speech")
         return (speech - _like(self.speech_mean, speech)) / _like(self.speech_std, speech)
 
+    def normalise_style(self, style):
+        """``(..., 4)`` style features (:data:`~gesturelib.style.STYLE_FEATURES`) -> standardised."""
+        _check_last_dim(style, len(STYLE_FEATURES), "style")
+        return (style - _like(self.style_mean, style)) / _like(self.style_std, style)
+
+    def style_at_percentiles(self, percentiles: dict[str, float]) -> np.ndarray:
+        """The style ``(4,)`` that holds each named feature at a percentile of its training
+        values (e.g. ``{"hand_height": 85}``) and the others at their median."""
+        unknown = sorted(set(percentiles) - set(STYLE_FEATURES))
+        if unknown:
+            raise ValueError(f"unknown style {unknown}; the style features are {STYLE_FEATURES}")
+        chosen = np.array([percentiles.get(name, 50.0) for name in STYLE_FEATURES], np.float64)
+        if not np.all((chosen >= 0) & (chosen <= 100)):
+            raise ValueError(f"style percentiles must lie in [0, 100], got {percentiles}")
+        grid = np.arange(101)
+        columns = self.style_percentiles.T.astype(np.float64)
+        return np.array(
+            [np.interp(p, grid, column) for p, column in zip(chosen, columns, strict=True)]
+        )
+
     def to_dict(self) -> dict:
         """JSON-able form (lists of floats)."""
         return {name: value.tolist() for name, value in asdict(self).items()}
@@ -287,7 +315,7 @@ class Normaliser:
     @classmethod
     def from_dict(cls, values: dict) -> Normaliser:
         """Inverse of :meth:`to_dict`; ``ValueError`` for missing keys, wrong lengths, NaN, std <= 0."""
-        expected = {"pose_mean", "pose_std", "speech_mean", "speech_std"}
+        expected = {f.name for f in fields(cls)}
         if not isinstance(values, Mapping):
             raise ValueError(
                 f"normaliser statistics must be a dictionary, got {type(values).__name__}"
@@ -372,7 +400,8 @@ class WindowDataset(Dataset):
         mirror: also serve the left-right mirror image of every conversation (training only).
 
     Items: see the module docstring (``pose (L, 54)``, ``past_pose (L, tau, 54)``,
-    ``speech (L, W, 27)``, ``activity (L, W, 4)`` with ``W = past + 1 + future``), float32.
+    ``speech (L, W, 27)``, ``activity (L, W, 4)`` with ``W = past + 1 + future``, ``style
+    (L, 4)``), float32.
     """
 
     def __init__(
@@ -412,6 +441,9 @@ class WindowDataset(Dataset):
                         normaliser.normalise_speech(conversation.speech).astype(np.float32)
                     ),
                     "activity": torch.from_numpy(conversation.activity.astype(np.float32)),
+                    "style": torch.from_numpy(
+                        normaliser.normalise_style(conversation.style).astype(np.float32)
+                    ),
                 }
             )
             self._index.extend((number, start) for start in range(first, last + 1, config.stride))
@@ -436,6 +468,7 @@ class WindowDataset(Dataset):
             "past_pose": _windows(streams["pose"][past], config.past_poses),
             "speech": _windows(streams["speech"][context], config.speech_window),
             "activity": _windows(streams["activity"][context], config.speech_window),
+            "style": streams["style"][targets],
         }
 
 
@@ -496,4 +529,5 @@ def control_dims(config: WindowConfig, n_mels: int = N_MELS) -> dict[str, int]:
         "past_pose": config.past_poses * POSE_DIM,
         "speech": config.speech_window * n_mels,
         "activity": config.speech_window * NUM_ACTIVITIES,
+        "style": len(STYLE_FEATURES),
     }

@@ -360,6 +360,51 @@ def prosody(audio: np.ndarray, sample_rate: int, fps: int = FPS) -> np.ndarray:
     return np.stack(columns, axis=1).astype(np.float32)
 
 
+#: A frame has voice when its energy is within this many decibels of the loud frames of the
+#: recording (its 95th percentile of frame energy); :func:`voice_activity`.
+VOICE_THRESHOLD_DB = 30.0
+
+
+def voice_activity(
+    audio: np.ndarray, sample_rate: int, fps: int = FPS, gap_s: float = 0.3, blip_s: float = 0.1
+) -> np.ndarray:
+    """Which motion frames hold speech, ``(T,)`` bool, from the energy of a recording of one voice.
+
+    A frame has voice when its energy is within :data:`VOICE_THRESHOLD_DB` of the recording's loud
+    frames; pauses shorter than ``gap_s`` inside speech count as speech (the gaps between syllables
+    and words), and stretches of voice shorter than ``blip_s`` do not (clicks). Relative to the
+    recording, so the level it was recorded at does not matter; a recording without any sound
+    (all frames below the energy floor) has no voice.
+
+    Args:
+        audio, sample_rate, fps: as for :func:`mel_spectrogram`.
+        gap_s: the longest silence that does not end a stretch of speech.
+        blip_s: the shortest stretch of sound that counts as speech.
+    """
+    audio, sample_rate, fps, n_frames = _check_features_input(audio, sample_rate, fps)
+    boundaries = _frame_boundaries(n_frames, sample_rate, fps)
+    squares = np.square(audio[: boundaries[-1]], dtype=np.float64)
+    energy_db = 10 * np.log10(
+        np.add.reduceat(squares, boundaries[:-1]) / np.diff(boundaries) + ENERGY_FLOOR
+    )
+    loud = np.percentile(energy_db, 95)
+    voiced = (energy_db > loud - VOICE_THRESHOLD_DB) & (energy_db > 10 * np.log10(ENERGY_FLOOR) + 1)
+    voiced = ~_short_runs(~voiced, round(gap_s * fps), keep_ends=True)  # fill short pauses
+    return _short_runs(voiced, round(blip_s * fps), keep_ends=False)  # drop short blips
+
+
+def _short_runs(mask: np.ndarray, shortest: int, keep_ends: bool) -> np.ndarray:
+    """``mask`` without its runs of True shorter than ``shortest`` frames (runs touching either
+    end of the recording are kept if ``keep_ends``)."""
+    result = mask.copy()
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        touches_end = start == 0 or end == len(mask)
+        if end - start < shortest and not (keep_ends and touches_end):
+            result[start:end] = False
+    return result
+
+
 def _log_f0_per_frame(audio: np.ndarray, sample_rate: int, fps: int, n_frames: int) -> np.ndarray:
     """Log-F0 ``(T,)`` per motion frame, unvoiced gaps interpolated (see :func:`prosody`)."""
     hop = max(1, sample_rate // (PITCH_FRAMES_PER_FRAME * fps))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import random
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -83,3 +84,11 @@ def device_of(module: torch.nn.Module) -> torch.device:
     """Where a module's parameters live (the CPU for a module without parameters)."""
     parameter = next(module.parameters(), None)
     return torch.device("cpu") if parameter is None else parameter.device
+
+
+def data_folder(quick: bool) -> Path:
+    """Where the synthetic dataset lives: ``data/quick`` or ``data/full`` of the repository (of
+    the working folder when gesturelib is installed outside one); the notebooks share it."""
+    repository = Path(__file__).resolve().parents[1]
+    root = repository if (repository / "pyproject.toml").exists() else Path.cwd()
+    return root / "data" / ("quick" if quick else "full")

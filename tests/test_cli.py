@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from gesturelib.cli import DEMO_MARKER, main
+from gesturelib.cli import OUTPUT_MARKER, main
 from gesturelib.features import load_audio
 
 
@@ -16,7 +16,7 @@ def demo_folder(tmp_path_factory):
 
 def test_demo_writes_a_video_with_sound_pictures_and_the_raw_files(demo_folder):
     names = {path.name for path in demo_folder.iterdir()}
-    assert {"agent.mp4", "timeline.png", "poses.png", DEMO_MARKER} <= names
+    assert {"agent.mp4", "timeline.png", "poses.png", OUTPUT_MARKER} <= names
     assert {"conversation.wav", "conversation.npz", "conversation.json"} <= names
     assert (demo_folder / "agent.mp4").stat().st_size > 10_000
     audio, rate = load_audio(demo_folder / "conversation.wav")

@@ -1,3 +1,4 @@
+import dataclasses
 import json
 from dataclasses import dataclass
 
@@ -14,7 +15,14 @@ from gesturelib.data import (
     control_dims,
     make_datasets,
 )
-from gesturelib.skeleton import POSE_DIM, mirror_rotations
+from gesturelib.features import activity_one_hot
+from gesturelib.skeleton import (
+    POSE_DIM,
+    forward_kinematics,
+    mirror_rotations,
+    rotations_from_positions,
+)
+from gesturelib.style import STYLE_FEATURES
 
 
 @dataclass
@@ -27,13 +35,26 @@ class FakeConversation:
 
 
 def fake_conversation(n_frames: int, seed: int) -> FakeConversation:
-    """Poses whose every number encodes its frame index (frame t has values t + 0.01 * d)."""
+    """Random poses (valid limb rotations), noise for audio, random activity codes."""
     rng = np.random.default_rng(seed)
-    frame = np.arange(n_frames, dtype=np.float32)[:, None] + 0.01 * np.arange(POSE_DIM)
+    positions = forward_kinematics(rng.standard_normal((n_frames, 9, 6)))
     return FakeConversation(
         audio=(0.1 * rng.standard_normal(n_frames * SAMPLE_RATE // FPS)).astype(np.float32),
-        rotations=frame.reshape(n_frames, 9, 6).astype(np.float32),
+        rotations=rotations_from_positions(positions).astype(np.float32),
         activity=rng.integers(0, 4, n_frames),
+    )
+
+
+def indexed_features(n_frames: int, seed: int = 0) -> ConversationFeatures:
+    """Features whose pose and style numbers encode their frame index: frame t has pose values
+    t + 0.01 * d and style values t + 0.1 * i (not rotations: for checking windows only)."""
+    rng = np.random.default_rng(seed)
+    frames = np.arange(n_frames, dtype=np.float32)[:, None]
+    return ConversationFeatures(
+        pose=frames + 0.01 * np.arange(POSE_DIM, dtype=np.float32),
+        speech=rng.standard_normal((n_frames, 27)).astype(np.float32),
+        activity=activity_one_hot(rng.integers(0, 4, n_frames)),
+        style=frames + 0.1 * np.arange(len(STYLE_FEATURES), dtype=np.float32),
     )
 
 
@@ -42,18 +63,23 @@ IDENTITY = Normaliser(
     pose_std=np.ones(POSE_DIM, np.float32),
     speech_mean=np.zeros(27, np.float32),
     speech_std=np.ones(27, np.float32),
+    style_mean=np.zeros(4, np.float32),
+    style_std=np.ones(4, np.float32),
+    style_percentiles=np.tile(np.linspace(-2.0, 2.0, 101)[:, None], (1, 4)),
 )
 
 
 @pytest.fixture(scope="module")
 def features():
-    return ConversationFeatures.from_conversation(fake_conversation(100, seed=0))
+    return indexed_features(100)
 
 
-def test_features_have_one_row_per_frame(features):
+def test_features_have_one_row_per_frame():
+    features = ConversationFeatures.from_conversation(fake_conversation(100, seed=0))
     assert features.pose.shape == (100, POSE_DIM)
     assert features.speech.shape == (100, 27)
     assert features.activity.shape == (100, 4)
+    assert features.style.shape == (100, len(STYLE_FEATURES))
 
 
 @pytest.mark.parametrize("length", [1, 8])
@@ -66,8 +92,9 @@ def test_window_shapes_and_count(features, length):
     assert item["past_pose"].shape == (length, 5, POSE_DIM)
     assert item["speech"].shape == (length, 31, 27)
     assert item["activity"].shape == (length, 31, 4)
+    assert item["style"].shape == (length, 4)
     assert all(value.dtype == torch.float32 for value in item.values())
-    assert sum(control_dims(config).values()) == 5 * POSE_DIM + 31 * (27 + 4)
+    assert sum(control_dims(config).values()) == 5 * POSE_DIM + 31 * (27 + 4) + 4
 
 
 def test_windows_hold_the_right_frames(features):
@@ -82,6 +109,7 @@ def test_windows_hold_the_right_frames(features):
             assert item["past_pose"][k, :, 0].round().long().tolist() == [t - 3, t - 2, t - 1]
             np.testing.assert_allclose(item["speech"][k], features.speech[t - 2 : t + 5])
             np.testing.assert_allclose(item["activity"][k], features.activity[t - 2 : t + 5])
+            assert item["style"][k, 0].round().long().item() == t
     last = dataset[len(dataset) - 1]["pose"][-1, 0].round().long().item()
     assert last + config.speech_future <= 99, "the future context stays inside the conversation"
 
@@ -109,7 +137,9 @@ def test_normaliser_standardises_and_inverts():
 
 def test_constant_feature_is_centred_not_blown_up():
     features = ConversationFeatures.from_conversation(fake_conversation(60, seed=3))
-    constant = ConversationFeatures(np.ones_like(features.pose), features.speech, features.activity)
+    constant = ConversationFeatures(
+        np.ones_like(features.pose), features.speech, features.activity, features.style
+    )
     normalised = Normaliser.fit([constant]).normalise_pose(constant.pose)
     assert np.isfinite(normalised).all() and np.abs(normalised).max() < 1e-3
 
@@ -159,27 +189,34 @@ def test_bad_configs_and_inputs_are_rejected(tmp_path, features):
 
 
 def test_features_of_different_lengths_or_shapes_are_refused(features):
-    pose, speech, activity = features.pose, features.speech, features.activity
+    pose, speech, activity, style = (
+        features.pose,
+        features.speech,
+        features.activity,
+        features.style,
+    )
     with pytest.raises(ValueError, match="100 pose frames, 99 speech frames, 100 activity"):
-        ConversationFeatures(pose, speech[:-1], activity)
+        ConversationFeatures(pose, speech[:-1], activity, style)
     with pytest.raises(
         ValueError, match=r"pose must be .* \(T, 54\), got float32 of shape \(100, 9, 6\)"
     ):
-        ConversationFeatures(pose.reshape(100, 9, 6), speech, activity)
+        ConversationFeatures(pose.reshape(100, 9, 6), speech, activity, style)
     with pytest.raises(
         ValueError, match=r"activity must be .* \(T, 4\), got int64 of shape \(100,\)"
     ):
-        ConversationFeatures(pose, speech, np.zeros(100, dtype=np.int64))
+        ConversationFeatures(pose, speech, np.zeros(100, dtype=np.int64), style)
+    with pytest.raises(ValueError, match=r"style must be .* \(T, 4\)"):
+        ConversationFeatures(pose, speech, activity, style[:, :3])
 
 
 def test_nan_poses_are_refused_before_they_reach_the_normaliser(features):
     pose = features.pose.copy()
     pose[10, 3] = np.nan
     with pytest.raises(ValueError, match="pose holds NaN or infinite values at frame 10"):
-        ConversationFeatures(pose, features.speech, features.activity)
+        ConversationFeatures(pose, features.speech, features.activity, features.style)
     conversation = fake_conversation(60, seed=9)
     conversation.rotations[12, 0, 0] = np.inf
-    with pytest.raises(ValueError, match="at frame 12"):
+    with pytest.raises(ValueError, match="at index 12: .* NaN or infinite"):
         make_datasets({"train": [conversation]}, WindowConfig())
 
 
@@ -239,8 +276,8 @@ def test_datasets_refuse_what_is_not_a_list_of_features(features):
         WindowDataset([fake_conversation(50, 10)], config, IDENTITY)
     with pytest.raises(ValueError, match="features is empty"):
         WindowDataset([], config, IDENTITY)
-    twenty_bands = Normaliser(
-        IDENTITY.pose_mean, IDENTITY.pose_std, np.zeros(20, np.float32), np.ones(20, np.float32)
+    twenty_bands = dataclasses.replace(
+        IDENTITY, speech_mean=np.zeros(20, np.float32), speech_std=np.ones(20, np.float32)
     )
     with pytest.raises(ValueError, match="27 mel bands but the normaliser was fitted on 20"):
         WindowDataset([features], config, twenty_bands)
@@ -248,7 +285,9 @@ def test_datasets_refuse_what_is_not_a_list_of_features(features):
         Normaliser.fit(
             [
                 features,
-                ConversationFeatures(features.pose, features.speech[:, :20], features.activity),
+                ConversationFeatures(
+                    features.pose, features.speech[:, :20], features.activity, features.style
+                ),
             ]
         )
     with pytest.raises(ValueError, match="split 'val' has no conversations"):

@@ -10,6 +10,7 @@ rebuilds it (``Model.config_class``). Configs have working defaults for the cour
 * :mod:`~gesturelib.models.baselines`: the deterministic regressors of Kucherenko et al.,
   :class:`Aud2Pose` and :class:`Aud2Repr2Pose` (trained after its
   :class:`MotionDenoisingAutoencoder`).
+* :mod:`~gesturelib.models.moglow`: :class:`MoGlow`, the autoregressive speech-conditioned flow.
 """
 
 from gesturelib.models.baselines import (
@@ -21,6 +22,7 @@ from gesturelib.models.baselines import (
     MotionDenoisingAutoencoder,
     SpeechWindowNet,
 )
+from gesturelib.models.moglow import MoGlow, MoGlowConfig
 from gesturelib.models.vae import (
     CVAE,
     CVAEConfig,
@@ -39,6 +41,8 @@ __all__ = [
     "Aud2Repr2Pose",
     "Aud2Repr2PoseConfig",
     "CVAEConfig",
+    "MoGlow",
+    "MoGlowConfig",
     "MotionDAEConfig",
     "MotionDenoisingAutoencoder",
     "PoseAutoencoder",

@@ -246,6 +246,14 @@ class Aud2Pose(nn.Module):
         with eval_mode(self):
             return self(batch)[0]
 
+    #: Deterministic: no noise per generated frame.
+    noise_dim = 0
+
+    def step(self, frame: dict[str, torch.Tensor], state, noise: torch.Tensor):
+        """One frame of generation (:mod:`gesturelib.sampling`): the pose ``(B, 54)`` of a frame
+        from its speech window (``L = 1``); no state, no noise."""
+        return self.predict(frame)[:, 0], None
+
 
 # ---------------------------------------------------------------------------------------------
 # Aud2Repr2Pose, stage 1: the motion representation
@@ -428,3 +436,6 @@ class Aud2Repr2Pose(nn.Module):
         """``MotionD(SpeechE(speech))`` for every frame: ``(B, L, 54)`` (normalised), eval mode."""
         with eval_mode(self):
             return self.autoencoder.decode(self(batch))
+
+    noise_dim = 0
+    step = Aud2Pose.step

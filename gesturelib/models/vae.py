@@ -486,6 +486,24 @@ class CVAE(nn.Module):
             shape = (*control.shape[:2], self.config.latent_dim)
             return self._decode(prior_sample(shape, temperature, generator, control), control)
 
+    #: The temperature generation (:mod:`gesturelib.sampling`) uses unless told otherwise.
+    default_temperature = 1.0
+
+    @property
+    def noise_dim(self) -> int:
+        """Numbers of prior noise per generated frame: ``z_t``."""
+        return self.config.latent_dim
+
+    @torch.no_grad()
+    def step(self, frame: dict[str, torch.Tensor], state, noise: torch.Tensor):
+        """One frame of generation (:mod:`gesturelib.sampling`): the pose ``(B, 54)`` decoded from
+        ``z_t = noise`` ``(B, latent_dim)`` and the control of one frame (``speech (B, 1, W, 27)``,
+        ``activity (B, 1, W, 4)``), carrying the decoder's state (None at the start)."""
+        with eval_mode(self):
+            control = self.control_features(frame, "CVAE.step")
+            states, state = self.decoder(torch.cat([noise[:, None], control], dim=-1), state)
+            return self.output(states)[:, 0], state
+
     @torch.no_grad()
     def reconstruct(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
         """Decoded posterior means of ``batch`` (poses and control): ``(B, L, 54)``, eval mode."""

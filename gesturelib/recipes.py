@@ -1,0 +1,143 @@
+"""How each model of the course is trained: its data windows and configs, in full and quick mode.
+
+One recipe per trainable model, used by ``python -m gesturelib train MODEL`` and by the chapters
+that train the same model, so that a model is the same wherever it is trained:
+
+==================  ======================  ==========================================================
+name                model                   trained on
+==================  ======================  ==========================================================
+``moglow``          :class:`MoGlow`         4 s excerpts (teacher forcing), built with the normaliser
+``cvae``            :class:`CVAE`           2 s excerpts
+``aud2pose``        :class:`Aud2Pose`       single frames with their speech windows
+``motion_dae``      the denoising            excerpts of 1 s (its frames independent); stage 1 of
+                    autoencoder             ``aud2repr2pose``
+``aud2repr2pose``   :class:`Aud2Repr2Pose`  single frames; built around a trained ``motion_dae``
+==================  ======================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from torch import nn
+
+from gesturelib.data import WindowConfig
+from gesturelib.models import (
+    CVAE,
+    Aud2Pose,
+    Aud2PoseConfig,
+    Aud2Repr2Pose,
+    Aud2Repr2PoseConfig,
+    CVAEConfig,
+    MoGlow,
+    MoGlowConfig,
+    MotionDAEConfig,
+    MotionDenoisingAutoencoder,
+)
+from gesturelib.train import TrainConfig
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """The windows and configs of one model; ``quick_*`` are the quick-mode variants.
+
+    Attributes:
+        model_class: the model.
+        windows, quick_windows: the :class:`~gesturelib.data.WindowConfig` of its training items.
+        model_config, quick_model_config: its config.
+        train_config, quick_train_config: its :class:`~gesturelib.train.TrainConfig`.
+        stage_one: the recipe of a model trained first and built into this one, or None.
+        build: ``build(config, normaliser, stage_one_model) -> model``; by default
+            ``model_class(config)``.
+    """
+
+    model_class: type[nn.Module]
+    windows: WindowConfig
+    quick_windows: WindowConfig
+    model_config: Any
+    quick_model_config: Any
+    train_config: TrainConfig
+    quick_train_config: TrainConfig
+    stage_one: str | None = None
+    build: Callable | None = None
+
+    def settings(self, quick: bool, **train_changes) -> tuple[WindowConfig, Any, TrainConfig]:
+        """``(windows, model_config, train_config)`` for full or quick mode; ``train_changes``
+        override training fields (the seed, the device)."""
+        train = self.quick_train_config if quick else self.train_config
+        return (
+            self.quick_windows if quick else self.windows,
+            self.quick_model_config if quick else self.model_config,
+            dataclasses.replace(train, **train_changes),
+        )
+
+    def make(self, config, normaliser, stage_one_model=None) -> nn.Module:
+        """The untrained model."""
+        if self.build is None:
+            return self.model_class(config)
+        return self.build(config, normaliser, stage_one_model)
+
+
+_REGRESSOR_TRAINING = TrainConfig(epochs=10, batch_size=64, warmup_steps=200, patience=4)
+_QUICK_REGRESSOR_TRAINING = TrainConfig.quick(epochs=4, batch_size=32, warmup_steps=100)
+_FRAMES = WindowConfig(sequence_length=1, stride=8)
+_QUICK_FRAMES = WindowConfig(sequence_length=1, stride=6)
+
+RECIPES: dict[str, Recipe] = {
+    "moglow": Recipe(
+        MoGlow,
+        WindowConfig(sequence_length=100, stride=50),
+        WindowConfig(sequence_length=50, stride=25),
+        MoGlowConfig(),
+        MoGlowConfig.quick(),
+        TrainConfig(epochs=30, batch_size=16, warmup_steps=500, patience=8),
+        TrainConfig.quick(epochs=3, batch_size=8, warmup_steps=50),
+        build=lambda config, normaliser, _: MoGlow(config, normaliser),
+    ),
+    "cvae": Recipe(
+        CVAE,
+        WindowConfig(sequence_length=50, stride=25),
+        WindowConfig(sequence_length=50, stride=10),
+        CVAEConfig(),
+        CVAEConfig.quick(),
+        TrainConfig(epochs=20, batch_size=32, warmup_steps=200, patience=5),
+        TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=100),
+    ),
+    "aud2pose": Recipe(
+        Aud2Pose,
+        _FRAMES,
+        _QUICK_FRAMES,
+        Aud2PoseConfig(),
+        Aud2PoseConfig.quick(),
+        _REGRESSOR_TRAINING,
+        _QUICK_REGRESSOR_TRAINING,
+    ),
+    "motion_dae": Recipe(
+        MotionDenoisingAutoencoder,
+        WindowConfig(sequence_length=25, stride=10),
+        WindowConfig(sequence_length=25, stride=10),
+        MotionDAEConfig(),
+        MotionDAEConfig.quick(),
+        TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5),
+        TrainConfig.quick(epochs=8, batch_size=16, warmup_steps=100),
+    ),
+    "aud2repr2pose": Recipe(
+        Aud2Repr2Pose,
+        _FRAMES,
+        _QUICK_FRAMES,
+        Aud2Repr2PoseConfig(),
+        Aud2Repr2PoseConfig.quick(),
+        _REGRESSOR_TRAINING,
+        _QUICK_REGRESSOR_TRAINING,
+        stage_one="motion_dae",
+        build=lambda config, _, autoencoder: Aud2Repr2Pose.from_autoencoder(autoencoder, config),
+    ),
+}
+
+#: The models a run folder can hold, by class name (what ``generate`` and ``info`` load).
+MODEL_CLASSES: dict[str, type[nn.Module]] = {
+    r.model_class.__name__: r.model_class for r in RECIPES.values()
+}

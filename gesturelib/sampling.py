@@ -1,0 +1,201 @@
+"""Generation: motion for any length of speech, frame by frame, with the model's state carried.
+
+Every generative model of the course generates one frame at a time through the same protocol:
+
+* ``model.step(frame, state, noise) -> (pose (B, 54), state)``: the next pose (normalised) from
+  the control of one frame, in the layout of a training batch with ``L = 1`` (``past_pose
+  (B, 1, tau, 54)``, ``speech (B, 1, W, 27)``, ``activity (B, 1, W, 4)``, ``style (B, 1, 4)``),
+  the state after the previous frame (None at the start) and the noise of this frame;
+* ``model.noise_dim``: numbers of noise per frame (0 for a deterministic model);
+* ``model.generating()``: a context in which the weights are fixed (optional).
+
+:class:`Stream` keeps everything else: the speech and activity windows, padded with silence
+beyond either end, the model's own past poses (starting from the mean pose) and its state. A live
+caller pushes speech frames as they arrive; because the control looks ``speech_future`` frames
+(1 s) ahead, the pose of a frame comes out that much later, and :meth:`Stream.finish` flushes the
+rest. :func:`generate` is the same for a whole recording.
+
+* **Temperature** scales the noise: ``z = temperature * eps``; 0 gives ``z = 0``, the base
+  distribution's mode pushed through the model (deterministic). Defaults to the model's
+  ``default_temperature``.
+* **Seeds**: ``seed=s`` gives sample ``k`` a generator of its own, derived from ``(s, k)``, so the
+  same seed gives the same motion, and sample 1 of three is sample 1 of one.
+* **Samples**: ``samples=K`` draws K motions for the same speech at once (a batch).
+* Every output pose is put back on the pose surface (:func:`gesturelib.pose_surface.project`,
+  which keeps each limb's direction) before it is fed back and returned.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+
+import numpy as np
+import torch
+
+from gesturelib.configs import check_temperature
+from gesturelib.conventions import Activity
+from gesturelib.features import MEL_FLOOR, activity_one_hot
+from gesturelib.pose_surface import project
+from gesturelib.runtime import device_of, standard_normal
+from gesturelib.skeleton import NUM_JOINTS, POSE_DIM
+
+#: The log-mel of silence: what the speech window holds beyond either end of a recording.
+SILENCE = float(np.log(MEL_FLOOR))
+
+
+class Stream:
+    """Frame-by-frame generation for ``samples`` motions of the same speech.
+
+    Args:
+        model: follows the generation protocol (module docstring).
+        normaliser: the :class:`~gesturelib.data.Normaliser` the model was trained with.
+        samples: how many motions to draw, ``K``.
+        temperature: scales the noise; None for the model's default; 0: deterministic.
+        seed: an int (each sample gets a generator of its own) or a ``torch.Generator`` (all
+            samples draw from it), or None (PyTorch's global generator).
+        style: the style to hold, ``(4,)`` raw values (e.g. from
+            ``normaliser.style_at_percentiles``), for a model with style control; None for its
+            median.
+    """
+
+    def __init__(self, model, normaliser, *, samples=1, temperature=None, seed=None, style=None):
+        if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
+            raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
+        self.model, self.normaliser, self.samples = model, normaliser, samples
+        default = getattr(model, "default_temperature", 1.0)
+        self.temperature = check_temperature(default if temperature is None else temperature)
+        self.generators = _generators(seed, samples)
+        config = model.config
+        self.past_poses = getattr(config, "past_poses", 0)
+        self.speech_past, self.speech_future = config.speech_past, config.speech_future
+        self.device = device_of(model)
+        self.state = None
+        self.past = torch.zeros(samples, self.past_poses, POSE_DIM, device=self.device)
+        tensor = functools.partial(torch.as_tensor, dtype=torch.float32, device=self.device)
+        self.pose_mean, self.pose_std = tensor(normaliser.pose_mean), tensor(normaliser.pose_std)
+        self.silence = tensor(
+            normaliser.normalise_speech(np.full(len(normaliser.speech_mean), SILENCE))
+        )
+        self.none = tensor(activity_one_hot(np.array([Activity.NONE]))[0])
+        # What has arrived, normalised, from frame ``first`` on (silence before the start).
+        self.speech = self.silence.expand(self.speech_past, -1)
+        self.activity = self.none.expand(self.speech_past, -1)
+        self.first = -self.speech_past
+        self.next_frame = 0  # the frame whose pose comes next
+        self.received = 0
+        self.style = None
+        if getattr(config, "style", False):
+            raw = normaliser.style_at_percentiles({}) if style is None else np.asarray(style)
+            self.style = tensor(normaliser.normalise_style(raw)).expand(samples, 1, -1)
+
+    def push(self, speech: np.ndarray, activity: np.ndarray) -> np.ndarray:
+        """Add frames of speech; return the poses that can now be generated.
+
+        Args:
+            speech: ``(n, n_mels)`` log-mel frames (raw, as
+                :func:`~gesturelib.features.mel_spectrogram` gives them).
+            activity: ``(n,)`` who-is-talking codes (:class:`~gesturelib.conventions.Activity`).
+        Returns:
+            ``(samples, m, 9, 6)`` limb rotations of the ``m`` frames that are now complete: those
+            whose ``speech_future`` frames of look-ahead have arrived.
+        """
+        speech, activity = np.asarray(speech, np.float32), np.asarray(activity)
+        n_mels = len(self.normaliser.speech_mean)
+        if speech.ndim != 2 or speech.shape[1] != n_mels:
+            raise ValueError(f"speech must be (n, {n_mels}) log-mel frames, got {speech.shape}")
+        if activity.shape != (len(speech),):
+            raise ValueError(f"activity must be ({len(speech)},) codes, got {activity.shape}")
+        normalised = self.normaliser.normalise_speech(speech)
+        codes = activity_one_hot(activity)
+        self._append(
+            torch.as_tensor(normalised, device=self.device),
+            torch.as_tensor(codes, dtype=torch.float32, device=self.device),
+        )
+        self.received += len(speech)
+        return self._generate(self.received - self.speech_future)
+
+    def finish(self) -> np.ndarray:
+        """The poses of the last frames, their look-ahead padded with silence:
+        ``(samples, m, 9, 6)``."""
+        future = self.speech_future
+        self._append(self.silence.expand(future, -1), self.none.expand(future, -1))
+        return self._generate(self.received)
+
+    def _append(self, speech: torch.Tensor, activity: torch.Tensor) -> None:
+        self.speech = torch.cat([self.speech, speech])
+        self.activity = torch.cat([self.activity, activity])
+
+    def _generate(self, until: int) -> np.ndarray:
+        """The poses of frames ``next_frame .. until - 1``, as limb rotations."""
+        poses = []
+        window = self.speech_past + 1 + self.speech_future
+        entered = getattr(self.model, "generating", contextlib.nullcontext)
+        with entered(), torch.no_grad():
+            while self.next_frame < until:
+                start = self.next_frame - self.speech_past - self.first  # its window's first row
+                frame = {
+                    "past_pose": self.past[:, None],
+                    "speech": self.speech[start : start + window].expand(self.samples, 1, -1, -1),
+                    "activity": self.activity[start : start + window].expand(
+                        self.samples, 1, -1, -1
+                    ),
+                }
+                if self.style is not None:
+                    frame["style"] = self.style
+                pose, self.state = self.model.step(frame, self.state, self._noise())
+                pose = self._on_surface(pose)
+                if self.past_poses:
+                    self.past = torch.cat([self.past[:, 1:], pose[:, None]], dim=1)
+                poses.append(pose)
+                self.next_frame += 1
+        # Forget the frames no window will need again.
+        drop = self.next_frame - self.speech_past - self.first
+        self.speech, self.activity, self.first = (
+            self.speech[drop:],
+            self.activity[drop:],
+            self.first + drop,
+        )
+        if not poses:
+            return np.zeros((self.samples, 0, NUM_JOINTS, 6))
+        raw = torch.stack(poses, dim=1) * self.pose_std + self.pose_mean
+        return raw.double().cpu().numpy().reshape(self.samples, -1, NUM_JOINTS, 6)
+
+    def _noise(self) -> torch.Tensor:
+        dim = getattr(self.model, "noise_dim", 0)
+        if self.temperature == 0 or dim == 0:
+            return torch.zeros(self.samples, dim, device=self.device)
+        if isinstance(self.generators, list):
+            draws = [standard_normal((1, dim), g, self.device) for g in self.generators]
+            return self.temperature * torch.cat(draws)
+        return self.temperature * standard_normal((self.samples, dim), self.generators, self.device)
+
+    def _on_surface(self, pose: torch.Tensor) -> torch.Tensor:
+        """``pose`` ``(K, 54)`` (normalised) with every limb put back on the pose surface."""
+        raw = (pose * self.pose_std + self.pose_mean).unflatten(-1, (NUM_JOINTS, 6))
+        return (project(raw).flatten(-2) - self.pose_mean) / self.pose_std
+
+
+def generate(model, normaliser, speech, activity, **options) -> np.ndarray:
+    """Motion for a whole recording: limb rotations ``(samples, T, 9, 6)``.
+
+    Args:
+        model, normaliser: as for :class:`Stream`.
+        speech: ``(T, n_mels)`` raw log-mel of the recording (any ``T >= 1``).
+        activity: ``(T,)`` who-is-talking codes; pass other codes than the recording's to make the
+            agent speak or listen where it did not.
+        options: ``samples``, ``temperature``, ``seed``, ``style`` of :class:`Stream`.
+    """
+    stream = Stream(model, normaliser, **options)
+    first = stream.push(speech, activity)
+    return np.concatenate([first, stream.finish()], axis=1)
+
+
+def _generators(seed, samples: int):
+    """One generator per sample from an int seed; a given generator (or None) is shared."""
+    if seed is None or isinstance(seed, torch.Generator):
+        return seed
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise TypeError(f"seed must be an int, a torch.Generator or None, got {seed!r}")
+    states = np.random.SeedSequence(int(seed)).spawn(samples)
+    return [torch.Generator().manual_seed(int(s.generate_state(1)[0])) for s in states]

@@ -1,0 +1,201 @@
+"""MoGlow, the pose surface and generation: likelihoods, sequence vs frame by frame, seeds."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from torch.autograd.functional import jacobian
+
+from data_synth import generate_conversation
+from gesturelib.data import ConversationFeatures, Normaliser, WindowConfig, WindowDataset
+from gesturelib.features import mel_spectrogram
+from gesturelib.models import MoGlow, MoGlowConfig
+from gesturelib.pose_surface import SurfaceNoise, project
+from gesturelib.sampling import Stream, generate
+from gesturelib.skeleton import forward_kinematics
+
+SMALL = MoGlowConfig.quick(speech_past=2, speech_future=3, past_poses=2, steps=2, hidden=8)
+
+
+@pytest.fixture(scope="module")
+def data():
+    """Features of a short conversation, its normaliser and 12-frame windows of it."""
+    conversation = generate_conversation(8.0, seed=5)
+    features = ConversationFeatures.from_conversation(conversation)
+    normaliser = Normaliser.fit([features])
+    windows = WindowConfig(
+        speech_past=2, speech_future=3, past_poses=2, sequence_length=12, stride=12
+    )
+    dataset = WindowDataset([features], windows, normaliser)
+    batch = {name: torch.stack([dataset[i][name] for i in range(3)]) for name in dataset[0]}
+    return conversation, normaliser, batch
+
+
+def trained_looking(config, normaliser, batch, seed=0):
+    """A model whose every weight is random (so nothing is an identity) and whose ActNorm layers
+    have seen data."""
+    torch.manual_seed(seed)
+    model = MoGlow(config, normaliser)
+    model.loss(batch)  # initialises ActNorm and the conditioners
+    generator = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for parameter in model.parameters():
+            parameter.add_(0.2 * torch.randn(parameter.shape, generator=generator))
+    return model.eval()
+
+
+def test_a_whole_sequence_inverts_and_its_logdet_is_the_jacobians(data):
+    _, normaliser, batch = data
+    model = trained_looking(SMALL, normaliser, batch).double()
+    short = {name: part[:1, :3].double() for name, part in batch.items()}  # (1, 3, ...)
+    cond = model.control(short)
+    z, logdet, _ = model.flow(short["pose"], cond)
+    x, inverse_logdet, _ = model.flow.inverse(z, cond)
+    torch.testing.assert_close(x, short["pose"])
+    torch.testing.assert_close(inverse_logdet, -logdet)
+    matrix = jacobian(
+        lambda v: model.flow(v.reshape(1, 3, 54), cond)[0].flatten(), short["pose"].flatten()
+    )
+    torch.testing.assert_close(torch.linalg.slogdet(matrix)[1], logdet[0], atol=1e-8, rtol=1e-8)
+
+
+def test_teacher_forcing_and_frame_by_frame_agree_on_likelihood_and_samples(data):
+    _, normaliser, batch = data
+    model = trained_looking(SMALL, normaliser, batch).double()
+    batch = {name: part.double() for name, part in batch.items()}
+    cond = model.control(batch)
+    log_prob, _ = model.flow.log_prob(batch["pose"], cond)
+    state, total = None, torch.zeros(3, dtype=torch.float64)
+    for t in range(batch["pose"].shape[1]):
+        frame_log_prob, state = model.flow.log_prob(
+            batch["pose"][:, t : t + 1], cond[:, t : t + 1], state
+        )
+        total = total + frame_log_prob
+    torch.testing.assert_close(total, log_prob)
+    z = torch.randn(
+        batch["pose"].shape, dtype=torch.float64, generator=torch.Generator().manual_seed(1)
+    )
+    whole, _, _ = model.flow.inverse(z, cond)
+    state, frames = None, []
+    with model.generating():
+        for t in range(z.shape[1]):
+            frame = {name: part[:, t : t + 1] for name, part in batch.items()}
+            pose, state = model.step(frame, state, z[:, t])
+            frames.append(pose)
+    torch.testing.assert_close(torch.stack(frames, dim=1), whole)
+
+
+def test_data_dropout_changes_training_but_nothing_at_evaluation(data):
+    _, normaliser, batch = data
+    model = trained_looking(SMALL, normaliser, batch)
+    no_dropout = MoGlow(dataclasses.replace(SMALL, dropout=0.0), normaliser)
+    no_dropout.load_state_dict(model.state_dict())
+    no_dropout.eval()
+    evaluated = model.loss(batch)["loss"]
+    assert torch.equal(evaluated, model.loss(batch)["loss"])  # fixed noise: the same every time
+    assert torch.equal(evaluated, no_dropout.loss(batch)["loss"])
+    model.train()
+    torch.manual_seed(0)
+    with_dropout = model.loss(batch)["loss"]
+    no_dropout.train()
+    torch.manual_seed(0)
+    assert not torch.equal(with_dropout, no_dropout.loss(batch)["loss"])
+
+
+def test_noise_off_the_surface_moves_no_limb_and_isotropic_noise_does(data):
+    conversation, normaliser, _ = data
+    pose = torch.tensor(
+        normaliser.normalise_pose(conversation.rotations.reshape(-1, 54)), dtype=torch.float64
+    )
+
+    def keypoints(normalised):
+        raw = normaliser.denormalise_pose(normalised.numpy()).reshape(-1, 9, 6)
+        return forward_kinematics(raw)
+
+    moves = {}
+    for across_only in (True, False):
+        noise = SurfaceNoise(0.05, across_only).double()
+        noise.set_statistics(normaliser)
+        drawn = noise(pose, torch.Generator().manual_seed(0))
+        assert 0.03 < drawn.pow(2).mean().sqrt() < 0.06
+        moves[across_only] = np.linalg.norm(
+            keypoints(pose + drawn) - keypoints(pose), axis=-1
+        ).mean()
+    assert moves[True] < 0.01 < 0.05 < moves[False]  # cm
+    with pytest.raises(RuntimeError, match="normalisation"):
+        SurfaceNoise(0.05)(pose)
+
+
+def test_project_keeps_poses_on_the_surface_and_returns_others_to_it(data):
+    conversation, _, _ = data
+    rotations = torch.tensor(conversation.rotations, dtype=torch.float64)
+    torch.testing.assert_close(project(rotations), rotations, atol=1e-6, rtol=0)
+    off = rotations + 0.1 * torch.randn(rotations.shape, generator=torch.Generator().manual_seed(2))
+    again = project(off)
+    torch.testing.assert_close(project(again), again)
+    np.testing.assert_allclose(forward_kinematics(again), forward_kinematics(off), atol=1e-6)
+
+
+def generation_setup(data):
+    conversation, normaliser, batch = data
+    model = trained_looking(SMALL, normaliser, batch)
+    speech = mel_spectrogram(conversation.audio, conversation.sample_rate)
+    return model, normaliser, speech, conversation.activity
+
+
+def test_same_seed_same_motion_and_sample_k_does_not_depend_on_how_many(data):
+    model, normaliser, speech, activity = generation_setup(data)
+    three = generate(model, normaliser, speech, activity, samples=3, seed=4)
+    one = generate(model, normaliser, speech, activity, samples=1, seed=4)
+    assert three.shape == (3, len(speech), 9, 6)
+    np.testing.assert_allclose(three[0], one[0], atol=1e-4)  # up to batched float rounding
+    assert np.abs(three[0] - three[1]).max() > 0.01
+    other = generate(model, normaliser, speech, activity, seed=5)
+    assert not np.array_equal(other[0], one[0])
+
+
+def test_temperature_zero_is_deterministic_whatever_the_seed(data):
+    model, normaliser, speech, activity = generation_setup(data)
+    first = generate(model, normaliser, speech, activity, temperature=0, seed=1)
+    np.testing.assert_array_equal(
+        first, generate(model, normaliser, speech, activity, temperature=0, seed=2)
+    )
+
+
+def test_streaming_in_chunks_gives_the_motion_of_the_whole_recording(data):
+    model, normaliser, speech, activity = generation_setup(data)
+    whole = generate(model, normaliser, speech, activity, seed=3)
+    stream, parts = Stream(model, normaliser, seed=3), []
+    for start in range(0, len(speech), 7):  # 7 frames at a time, as a live caller would
+        parts.append(stream.push(speech[start : start + 7], activity[start : start + 7]))
+    parts.append(stream.finish())
+    np.testing.assert_allclose(np.concatenate(parts, axis=1), whole, atol=1e-5)
+    assert parts[0].shape[1] == 7 - SMALL.speech_future  # the look-ahead delays the first poses
+
+
+def test_a_recording_of_one_frame_is_enough_and_bad_features_are_refused(data):
+    model, normaliser, speech, activity = generation_setup(data)
+    assert generate(model, normaliser, speech[:1], activity[:1]).shape == (1, 1, 9, 6)
+    with pytest.raises(ValueError, match=r"speech must be \(n, 27\) log-mel frames"):
+        generate(model, normaliser, speech[:, :20], activity)
+    with pytest.raises(ValueError, match="activity must be"):
+        generate(model, normaliser, speech, activity[:-1])
+    with pytest.raises(ValueError, match="samples must be an integer >= 1"):
+        generate(model, normaliser, speech, activity, samples=0)
+
+
+def test_style_control_holds_the_asked_style_and_refuses_impossible_percentiles(data):
+    conversation, normaliser, batch = data
+    batch = {**batch, "style": batch["style"]}
+    model = trained_looking(dataclasses.replace(SMALL, style=True), normaliser, batch)
+    speech = mel_spectrogram(conversation.audio, conversation.sample_rate)[:20]
+    activity = conversation.activity[:20]
+    high = normaliser.style_at_percentiles({"hand_height": 85})
+    low = normaliser.style_at_percentiles({"hand_height": 15})
+    assert high[0] > low[0]
+    a = generate(model, normaliser, speech, activity, seed=0, style=high)
+    b = generate(model, normaliser, speech, activity, seed=0, style=low)
+    assert not np.array_equal(a, b)  # the style reaches the model
+    with pytest.raises(ValueError, match=r"in \[0, 100\]"):
+        normaliser.style_at_percentiles({"hand_height": 101})
