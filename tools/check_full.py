@@ -60,7 +60,8 @@ def main() -> int:
     parser.add_argument("prefix", nargs="?", default="", help="e.g. 04; empty for every notebook")
     args = parser.parse_args()
     os.environ["GESTURELIB_QUICK"] = "0"  # inherited by the kernels
-    os.environ.setdefault("MPLBACKEND", "Agg")
+    # The inline backend, as in JupyterLab: with Agg, plt.show() draws nothing into the copies.
+    os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
     results = []
     for path in chapters(args.prefix):
         print(f"{path.name} ...", flush=True)
