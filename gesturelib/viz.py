@@ -57,11 +57,11 @@ def _bone_colour(child: int) -> str:
     return SIDE_COLOURS[side if side in ("left", "right") else "midline"]
 
 
-def side_legend(figure, **legend_options):
-    """Add a legend naming the bone colours, "left arm" and "right arm", to ``figure``.
+def side_legend(target, **legend_options):
+    """Add a legend naming the bone colours, "left arm" and "right arm", to a figure or an axes.
 
     The sides are the agent's own: in the front view its left arm is on your right.
-    ``legend_options`` go to ``Figure.legend`` (by default: lower right, in one row, no frame).
+    ``legend_options`` go to ``target.legend`` (by default: lower right, in one row, no frame).
     Returns the ``Legend``.
     """
     handles = [
@@ -69,7 +69,7 @@ def side_legend(figure, **legend_options):
         for side in ("left", "right")
     ]
     options = {"loc": "lower right", "ncol": 2, "fontsize": 9, "frameon": False, **legend_options}
-    return figure.legend(handles=handles, **options)
+    return target.legend(handles=handles, **options)
 
 
 def _with_root(positions: np.ndarray) -> np.ndarray:
@@ -347,7 +347,13 @@ def save_animation(
 
 
 def plot_timeline(
-    mel, activity, fps: float = FPS, events: dict | None = None, ax=None, title: str | None = None
+    mel,
+    activity,
+    fps: float = FPS,
+    events: dict | None = None,
+    ax=None,
+    title: str | None = None,
+    cmap: str = "magma",
 ):
     """A log-mel spectrogram with the speech activity as a coloured band underneath.
 
@@ -359,6 +365,8 @@ def plot_timeline(
             spectrogram (e.g. stressed syllables, gesture strokes).
         ax: two stacked axes ``(spectrogram_ax, activity_ax)``; a new figure when omitted.
         title: figure title.
+        cmap: colour map of the spectrogram; ``"Greys"`` (loud is dark) lets markers in the
+            activity colours stand out, which they do not on ``"magma"``'s oranges.
     Returns:
         The matplotlib ``Figure``.
     """
@@ -378,7 +386,7 @@ def plot_timeline(
     fig = spec_ax.figure
     duration = len(mel) / fps
     spec_ax.imshow(
-        mel.T, origin="lower", aspect="auto", extent=(0, duration, 0, mel.shape[1]), cmap="magma"
+        mel.T, origin="lower", aspect="auto", extent=(0, duration, 0, mel.shape[1]), cmap=cmap
     )
     spec_ax.set_ylabel("mel band")
     for (label, times), colour in zip((events or {}).items(), plt.cm.tab10.colors, strict=False):

@@ -101,7 +101,10 @@ def test_plot_timeline_shows_spectrogram_and_activity():
     mel = np.random.default_rng(1).normal(size=(50, 27))
     activity = np.repeat([0, 1, 2, 3, 0], 10)
     figure = viz.plot_timeline(mel, activity, events={"strokes": [0.3, 1.1]})
-    assert len(figure.axes) == 2
+    assert len(figure.axes) == 2 and figure.axes[0].images[0].get_cmap().name == "magma"
+    plt.close(figure)
+    figure = viz.plot_timeline(mel, activity, cmap="Greys")
+    assert figure.axes[0].images[0].get_cmap().name == "Greys"
     plt.close(figure)
 
 
