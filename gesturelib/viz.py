@@ -7,7 +7,8 @@
   and :func:`save_animation` writes it to a file: MP4 with the speech muxed in when an ffmpeg
   binary is available (the ``imageio-ffmpeg`` dependency ships one), a silent GIF otherwise.
 * :func:`side_legend` names the bone colours (the agent's left and right arm) in a figure.
-* :func:`plot_timeline` shows a mel spectrogram with who is talking underneath.
+* :func:`plot_timeline` shows a mel spectrogram with who is talking underneath;
+  :func:`shade_activity` shades any time axis by who is talking.
 * :func:`audio_player` plays audio in a notebook.
 
 Views: the agent faces +z with y up, so the *front* view (x horizontal, y up) shows the agent as a
@@ -416,6 +417,37 @@ def plot_timeline(
         spec_ax.set_title(title)
     fig.tight_layout(rect=(0, 0.07, 1, 1))  # leave room for the legend underneath
     return fig
+
+
+def shade_activity(ax, activity, fps: float = FPS, alpha: float = 0.25) -> list:
+    """Shade the time axis of ``ax`` (in seconds) by who is talking, in :data:`ACTIVITY_COLOURS`.
+
+    One span per run of frames of one class; frames where nobody talks stay unshaded. Frame ``t``
+    covers ``[t / fps, (t + 1) / fps)``.
+
+    Args:
+        ax: a matplotlib axes whose x axis is time in seconds.
+        activity: ``(T,)`` integer :class:`~gesturelib.conventions.Activity` codes.
+        fps: frames per second.
+        alpha: opacity of the shading.
+    Returns:
+        Legend handles, one per class that was shaded: ``ax.legend(handles=...)`` names them.
+    """
+    activity = np.asarray(activity)
+    if activity.ndim != 1 or activity.size == 0:
+        raise ValueError(f"activity must be a non-empty array of shape (T,), got {activity.shape}")
+    changes = np.flatnonzero(np.diff(activity)) + 1
+    shaded = []
+    for start, end in zip(np.r_[0, changes], np.r_[changes, len(activity)], strict=True):
+        code = Activity(int(activity[start]))
+        if code != Activity.NONE:
+            ax.axvspan(start / fps, end / fps, color=ACTIVITY_COLOURS[code], alpha=alpha, lw=0)
+            shaded.append(code)
+    return [
+        Patch(color=ACTIVITY_COLOURS[code], alpha=alpha, label=code.label)
+        for code in Activity
+        if code in shaded
+    ]
 
 
 def audio_player(audio, sample_rate: int):

@@ -108,6 +108,16 @@ def test_plot_timeline_shows_spectrogram_and_activity():
     plt.close(figure)
 
 
+def test_shade_activity_spans_each_run_of_talk_and_leaves_silence_white():
+    figure, ax = plt.subplots()
+    activity = np.array([3, 0, 0, 1, 1, 1, 3, 0])  # none, A, A, B, B, B, none, A
+    handles = viz.shade_activity(ax, activity, fps=2.0)
+    spans = [patch.get_x() for patch in ax.patches], [patch.get_width() for patch in ax.patches]
+    assert spans == ([0.5, 1.5, 3.5], [1.0, 1.5, 0.5])  # A, B, A; in seconds at 2 fps
+    assert [handle.get_label() for handle in handles] == ["A speaks", "B speaks"]
+    plt.close(figure)
+
+
 @pytest.mark.parametrize(
     ("call", "message"),
     [
@@ -122,6 +132,7 @@ def test_plot_timeline_shows_spectrogram_and_activity():
         ),
         (lambda m: viz.save_animation(viz.animate(m), "clip.avi"), "writes .mp4 or .gif"),
         (lambda m: viz.audio_player(np.zeros((2, 10)), 16000), "1-D"),
+        (lambda m: viz.shade_activity(plt.gca(), np.zeros((2, 3), int)), r"shape \(T,\)"),
     ],
 )
 def test_bad_input_is_rejected(motion, call, message):
