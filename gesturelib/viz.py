@@ -1,11 +1,14 @@
 """Pictures, animations and sound: how a person looks at poses, motion and speech.
 
 * :func:`plot_pose` draws a stick figure from the front and from the side.
-* :func:`animate` makes a matplotlib animation of one or more motions side by side;
+* :func:`animate` makes a matplotlib animation of one or more motions side by side, at least
+  :data:`MIN_ANIMATION_WIDTH_PX` pixels wide, with a legend for the agent's left and right;
   :func:`animation_html` embeds it in a notebook (``FuncAnimation.to_jshtml``: no ffmpeg needed)
   and :func:`save_animation` writes it to a file: MP4 with the speech muxed in when an ffmpeg
   binary is available (the ``imageio-ffmpeg`` dependency ships one), a silent GIF otherwise.
-* :func:`plot_timeline` shows a mel spectrogram with who is talking underneath.
+* :func:`side_legend` names the bone colours (the agent's left and right arm) in a figure.
+* :func:`plot_timeline` shows a mel spectrogram with who is talking underneath;
+  :func:`shade_activity` shades any time axis by who is talking.
 * :func:`audio_player` plays audio in a notebook.
 
 Views: the agent faces +z with y up, so the *front* view (x horizontal, y up) shows the agent as a
@@ -25,6 +28,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib import animation
 from matplotlib.colors import ListedColormap
+from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from gesturelib.conventions import FPS, Activity
@@ -41,13 +45,32 @@ ACTIVITY_COLOURS = {
 }
 
 
+#: Bone colours: the agent's left side, its right side, and the midline (spine, neck, head).
+SIDE_COLOURS = {"left": "#1f77b4", "right": "#d62728", "midline": "#444444"}
+#: Every animation is at least this wide, whatever its number of panels and its dpi.
+MIN_ANIMATION_WIDTH_PX = 720
+#: Width and height of one view of an animation, in inches (360 x 400 pixels at 100 dpi).
+_ANIMATION_PANEL_INCHES = (3.6, 4.0)
+
+
 def _bone_colour(child: int) -> str:
-    name = KEYPOINTS[child]
-    if name.startswith("left_"):
-        return "#1f77b4"
-    if name.startswith("right_"):
-        return "#d62728"
-    return "#444444"
+    side = KEYPOINTS[child].split("_")[0]
+    return SIDE_COLOURS[side if side in ("left", "right") else "midline"]
+
+
+def side_legend(target, **legend_options):
+    """Add a legend naming the bone colours, "left arm" and "right arm", to a figure or an axes.
+
+    The sides are the agent's own: in the front view its left arm is on your right.
+    ``legend_options`` go to ``target.legend`` (by default: lower right, in one row, no frame).
+    Returns the ``Legend``.
+    """
+    handles = [
+        Line2D([], [], color=SIDE_COLOURS[side], linewidth=3, label=f"{side} arm")
+        for side in ("left", "right")
+    ]
+    options = {"loc": "lower right", "ncol": 2, "fontsize": 9, "frameon": False, **legend_options}
+    return target.legend(handles=handles, **options)
 
 
 def _with_root(positions: np.ndarray) -> np.ndarray:
@@ -123,7 +146,8 @@ def plot_pose(
         positions: ``(9, 3)`` one pose, or ``(N, 9, 3)`` poses drawn on top of each other (lighter),
             in cm.
         views: which of ``"front"`` and ``"side"`` to draw, one axis each.
-        axes: existing matplotlib axes, one per view; a new figure is made when omitted.
+        axes: existing matplotlib axes, one per view; a new figure is made when omitted, with a
+            legend for the left and right arm (for given axes, :func:`side_legend` adds one).
         title: figure title.
         **line_style: passed to ``Axes.plot`` (e.g. ``alpha``, ``linewidth``).
     Returns:
@@ -134,8 +158,9 @@ def plot_pose(
     unknown = set(views) - set(VIEWS)
     if unknown:
         raise ValueError(f"unknown view(s) {sorted(unknown)}; choose from {sorted(VIEWS)}")
-    if axes is None:
-        fig, axes = plt.subplots(1, len(views), figsize=(3.2 * len(views), 3.4), squeeze=False)
+    made_figure = axes is None
+    if made_figure:
+        fig, axes = plt.subplots(1, len(views), figsize=(3.2 * len(views), 3.6), squeeze=False)
         axes = axes[0]
     fig = axes[0].figure
     alpha = line_style.pop("alpha", min(1.0, max(0.08, 3.0 / len(poses))))
@@ -145,7 +170,11 @@ def plot_pose(
         _style_axis(ax, view, _axis_limits(poses, view))
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    if made_figure:
+        side_legend(fig)
+        fig.tight_layout(rect=(0, 0.1, 1, 1))  # room for the legend underneath
+    else:
+        fig.tight_layout()
     return fig
 
 
@@ -155,9 +184,13 @@ def animate(
     titles: Sequence[str] | None = None,
     views: Sequence[str] = ("front", "side"),
     stride: int = 1,
-    dpi: int = 72,
+    dpi: int = 100,
 ):
     """Animate one motion, or several side by side (e.g. ground truth and a model's sample).
+
+    Each view is a 3.6 x 4 inch panel (360 x 400 pixels at the default dpi), and the figure is
+    widened where its panels would make it narrower than :data:`MIN_ANIMATION_WIDTH_PX` pixels. A
+    legend names the colours of the agent's left and right arm; a clock shows the time.
 
     Args:
         motions: ``(T, 9, 3)`` positions in cm, or a list of such arrays (same ``T``).
@@ -166,7 +199,8 @@ def animate(
         views: the views to show for each motion.
         stride: draw every ``stride``-th frame (the playback speed stays real time); use it to
             keep notebook animations light.
-        dpi: resolution of the rendered frames.
+        dpi: pixels per inch of the rendered frames (the width never drops below
+            :data:`MIN_ANIMATION_WIDTH_PX` pixels; a higher dpi renders more slowly).
     Returns:
         A ``matplotlib.animation.FuncAnimation``; the figure is closed so that notebooks show only
         the animation, via :func:`animation_html`.
@@ -185,15 +219,14 @@ def animate(
         raise ValueError(f"stride must be a positive integer, got {stride}")
     if fps <= 0:
         raise ValueError(f"fps must be positive, got {fps}")
+    if dpi <= 0:
+        raise ValueError(f"dpi must be positive, got {dpi}")
 
     n_frames = lengths.pop()
-    fig, axes = plt.subplots(
-        1,
-        len(motions) * len(views),
-        figsize=(2.6 * len(motions) * len(views), 3.0),
-        squeeze=False,
-        dpi=dpi,
-    )
+    n_panels = len(motions) * len(views)
+    panel_width, height = _ANIMATION_PANEL_INCHES
+    width = max(panel_width * n_panels, MIN_ANIMATION_WIDTH_PX / dpi)
+    fig, axes = plt.subplots(1, n_panels, figsize=(width, height), squeeze=False, dpi=dpi)
     axes = axes[0]
     panels = []  # (lines, motion, view)
     for i, motion in enumerate(motions):
@@ -203,8 +236,12 @@ def animate(
             if titles is not None and j == 0:
                 ax.set_title(f"{titles[i]}\n{view} view", fontsize=9)
             panels.append((_skeleton_lines(ax, view), motion, view))
-    clock = fig.text(0.01, 0.01, "", fontsize=8)
-    fig.tight_layout()
+    # The clock belongs to an axes: a figure-level artist that changes every frame (animated)
+    # is left out when the frames are saved.
+    clock = axes[0].text(0.01, 0.03, "", transform=fig.transFigure, fontsize=9)
+    side_legend(fig, loc="lower right")
+    # Fixed margins rather than tight_layout, which clips two-line titles above square axes.
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.1, top=0.86, wspace=0.05)
 
     def draw(frame: int):
         artists = [clock]
@@ -311,7 +348,13 @@ def save_animation(
 
 
 def plot_timeline(
-    mel, activity, fps: float = FPS, events: dict | None = None, ax=None, title: str | None = None
+    mel,
+    activity,
+    fps: float = FPS,
+    events: dict | None = None,
+    ax=None,
+    title: str | None = None,
+    cmap: str = "magma",
 ):
     """A log-mel spectrogram with the speech activity as a coloured band underneath.
 
@@ -323,6 +366,8 @@ def plot_timeline(
             spectrogram (e.g. stressed syllables, gesture strokes).
         ax: two stacked axes ``(spectrogram_ax, activity_ax)``; a new figure when omitted.
         title: figure title.
+        cmap: colour map of the spectrogram; ``"Greys"`` (loud is dark) lets markers in the
+            activity colours stand out, which they do not on ``"magma"``'s oranges.
     Returns:
         The matplotlib ``Figure``.
     """
@@ -342,7 +387,7 @@ def plot_timeline(
     fig = spec_ax.figure
     duration = len(mel) / fps
     spec_ax.imshow(
-        mel.T, origin="lower", aspect="auto", extent=(0, duration, 0, mel.shape[1]), cmap="magma"
+        mel.T, origin="lower", aspect="auto", extent=(0, duration, 0, mel.shape[1]), cmap=cmap
     )
     spec_ax.set_ylabel("mel band")
     for (label, times), colour in zip((events or {}).items(), plt.cm.tab10.colors, strict=False):
@@ -372,6 +417,37 @@ def plot_timeline(
         spec_ax.set_title(title)
     fig.tight_layout(rect=(0, 0.07, 1, 1))  # leave room for the legend underneath
     return fig
+
+
+def shade_activity(ax, activity, fps: float = FPS, alpha: float = 0.25) -> list:
+    """Shade the time axis of ``ax`` (in seconds) by who is talking, in :data:`ACTIVITY_COLOURS`.
+
+    One span per run of frames of one class; frames where nobody talks stay unshaded. Frame ``t``
+    covers ``[t / fps, (t + 1) / fps)``.
+
+    Args:
+        ax: a matplotlib axes whose x axis is time in seconds.
+        activity: ``(T,)`` integer :class:`~gesturelib.conventions.Activity` codes.
+        fps: frames per second.
+        alpha: opacity of the shading.
+    Returns:
+        Legend handles, one per class that was shaded: ``ax.legend(handles=...)`` names them.
+    """
+    activity = np.asarray(activity)
+    if activity.ndim != 1 or activity.size == 0:
+        raise ValueError(f"activity must be a non-empty array of shape (T,), got {activity.shape}")
+    changes = np.flatnonzero(np.diff(activity)) + 1
+    shaded = []
+    for start, end in zip(np.r_[0, changes], np.r_[changes, len(activity)], strict=True):
+        code = Activity(int(activity[start]))
+        if code != Activity.NONE:
+            ax.axvspan(start / fps, end / fps, color=ACTIVITY_COLOURS[code], alpha=alpha, lw=0)
+            shaded.append(code)
+    return [
+        Patch(color=ACTIVITY_COLOURS[code], alpha=alpha, label=code.label)
+        for code in Activity
+        if code in shaded
+    ]
 
 
 def audio_player(audio, sample_rate: int):

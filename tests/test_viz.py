@@ -1,3 +1,4 @@
+import re
 import subprocess
 
 import matplotlib.pyplot as plt
@@ -16,13 +17,27 @@ def motion():
     return forward_kinematics(rot6d)
 
 
+def _legend_labels(figure) -> list[list[str]]:
+    return [[text.get_text() for text in legend.get_texts()] for legend in figure.legends]
+
+
 def test_plot_pose_front_and_side(motion):
     figure = viz.plot_pose(motion[0])
     assert [ax.get_title() for ax in figure.axes] == ["front view", "side view"]
     assert len(figure.axes[0].lines) == 9  # one line per limb
+    assert _legend_labels(figure) == [["left arm", "right arm"]]
     plt.close(figure)
     figure = viz.plot_pose(motion[::5], views=("front",))
     assert len(figure.axes) == 1 and len(figure.axes[0].lines) == 4 * 9
+    plt.close(figure)
+
+
+def test_plot_pose_into_given_axes_leaves_the_legend_to_the_caller(motion):
+    figure, axes = plt.subplots(1, 2)
+    viz.plot_pose(motion[0], axes=axes)
+    assert figure.legends == []
+    viz.side_legend(figure)
+    assert _legend_labels(figure) == [["left arm", "right arm"]]
     plt.close(figure)
 
 
@@ -31,6 +46,18 @@ def test_animate_draws_every_stride_th_frame(motion):
     assert len(list(anim.new_frame_seq())) == 7  # frames 0, 3, ..., 18
     assert anim.event_source.interval == pytest.approx(3 * 1000 / 25)
     assert "<script" in viz.animation_html(anim)
+
+
+@pytest.mark.parametrize(
+    ("count", "views"), [(1, ("front",)), (1, ("front", "side")), (3, ("front",))]
+)
+def test_animations_are_wide_enough_and_name_left_and_right(motion, count, views):
+    anim = viz.animate([motion] * count, views=views, stride=10)
+    figure = anim._fig  # FuncAnimation keeps its figure there
+    width, _ = figure.get_size_inches() * figure.dpi
+    assert width >= viz.MIN_ANIMATION_WIDTH_PX
+    assert width == pytest.approx(max(720, 360 * count * len(views)))
+    assert _legend_labels(figure) == [["left arm", "right arm"]]
 
 
 def _streams(path) -> str:
@@ -49,6 +76,8 @@ def test_save_animation_muxes_the_audio_into_an_mp4(motion, tmp_path):
     assert path == tmp_path / "a.mp4"
     streams = _streams(path)
     assert "Video: h264" in streams and "Audio: aac" in streams
+    width, height = map(int, re.search(r"Video: h264.*?, (\d+)x(\d+)", streams).groups())
+    assert (width, height) == (720, 400)  # one motion, front and side view, at 100 dpi
     with pytest.raises(FileExistsError, match="overwrite=True"):
         viz.save_animation(viz.animate(motion), path)
 
@@ -72,7 +101,20 @@ def test_plot_timeline_shows_spectrogram_and_activity():
     mel = np.random.default_rng(1).normal(size=(50, 27))
     activity = np.repeat([0, 1, 2, 3, 0], 10)
     figure = viz.plot_timeline(mel, activity, events={"strokes": [0.3, 1.1]})
-    assert len(figure.axes) == 2
+    assert len(figure.axes) == 2 and figure.axes[0].images[0].get_cmap().name == "magma"
+    plt.close(figure)
+    figure = viz.plot_timeline(mel, activity, cmap="Greys")
+    assert figure.axes[0].images[0].get_cmap().name == "Greys"
+    plt.close(figure)
+
+
+def test_shade_activity_spans_each_run_of_talk_and_leaves_silence_white():
+    figure, ax = plt.subplots()
+    activity = np.array([3, 0, 0, 1, 1, 1, 3, 0])  # none, A, A, B, B, B, none, A
+    handles = viz.shade_activity(ax, activity, fps=2.0)
+    spans = [patch.get_x() for patch in ax.patches], [patch.get_width() for patch in ax.patches]
+    assert spans == ([0.5, 1.5, 3.5], [1.0, 1.5, 0.5])  # A, B, A; in seconds at 2 fps
+    assert [handle.get_label() for handle in handles] == ["A speaks", "B speaks"]
     plt.close(figure)
 
 
@@ -82,6 +124,7 @@ def test_plot_timeline_shows_spectrogram_and_activity():
         (lambda m: viz.plot_pose(m[:, :8]), r"positions must have shape \(\.\.\., 9, 3\)"),
         (lambda m: viz.animate([m, m[:10]]), "same length"),
         (lambda m: viz.animate(m, stride=0), "stride must be a positive integer"),
+        (lambda m: viz.animate(m, dpi=0), "dpi must be positive"),
         (lambda m: viz.plot_pose(m[0], views=("top",)), "unknown view"),
         (
             lambda m: viz.plot_timeline(np.zeros((5, 27)), np.zeros(4, int)),
@@ -89,6 +132,7 @@ def test_plot_timeline_shows_spectrogram_and_activity():
         ),
         (lambda m: viz.save_animation(viz.animate(m), "clip.avi"), "writes .mp4 or .gif"),
         (lambda m: viz.audio_player(np.zeros((2, 10)), 16000), "1-D"),
+        (lambda m: viz.shade_activity(plt.gca(), np.zeros((2, 3), int)), r"shape \(T,\)"),
     ],
 )
 def test_bad_input_is_rejected(motion, call, message):
