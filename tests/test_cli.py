@@ -40,3 +40,201 @@ def test_demo_never_writes_into_a_folder_of_other_files(tmp_path, capsys):
 def test_demo_rejects_a_non_positive_length(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path / "out"), "--seconds", "0"]) == 2
     assert "--seconds must be positive" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# train, generate, info: one small MoGlow trained once on a tiny dataset
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory):
+    from data_synth import write_dataset
+
+    folder = tmp_path_factory.mktemp("data")
+    write_dataset(folder, minutes=0.5, seed=0, conversation_s=10.0, progress=False)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def moglow_run(tmp_path_factory, tiny_data):
+    run = tmp_path_factory.mktemp("runs") / "moglow"
+    assert main(["train", "moglow", "--out", str(run), "--quick", "--data", str(tiny_data)]) == 0
+    return run
+
+
+def test_train_writes_a_run_folder_that_info_describes(moglow_run, capsys):
+    assert {"best.pt", "last.pt", "run.json"} <= {p.name for p in moglow_run.iterdir()}
+    summary = json.loads((moglow_run / "run.json").read_text())
+    assert summary["model"] == "moglow" and summary["quick"] and summary["version"] == 2
+    assert main(["info", str(moglow_run)]) == 0
+    described = capsys.readouterr().out
+    assert "MoGlow (" in described and "parameters" in described and "best epoch" in described
+
+
+def test_train_refuses_a_folder_in_use_and_resumes_or_replaces_only_when_asked(
+    moglow_run, tiny_data, tmp_path, capsys
+):
+    again = ["train", "moglow", "--out", str(moglow_run), "--quick", "--data", str(tiny_data)]
+    assert main(again) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "--resume" in error and "--overwrite" in error
+    before = (moglow_run / "best.pt").read_bytes()
+    assert main([*again, "--resume"]) == 0  # finished: nothing more to train
+    assert (moglow_run / "best.pt").read_bytes() == before
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    assert (
+        main(
+            ["train", "cvae", "--out", str(other), "--quick", "--data", str(tiny_data), "--resume"]
+        )
+        == 2
+    )
+    assert "no run to resume" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "train",
+                "cvae",
+                "--out",
+                str(other),
+                "--quick",
+                "--data",
+                str(tiny_data),
+                "--overwrite",
+            ]
+        )
+        == 0
+    )
+    assert (other / "notes.txt").read_text() == "mine"  # --overwrite replaces the run's files only
+
+
+def write_wav(path, seconds=3.0, seed=2):
+    from data_synth import generate_conversation
+    from gesturelib.features import save_audio
+
+    conversation = generate_conversation(max(seconds, 5.0), seed=seed)
+    samples = int(seconds * conversation.sample_rate)
+    save_audio(path, conversation.audio[:samples], conversation.sample_rate)
+    return samples
+
+
+def test_generate_from_a_wav_writes_the_motion_of_every_frame(moglow_run, tmp_path):
+    samples = write_wav(tmp_path / "speech.wav", seconds=2.5)
+    out = tmp_path / "out"
+    args = ["generate", str(moglow_run), "--audio", str(tmp_path / "speech.wav"), "--out", str(out)]
+    assert main([*args, "--no-video", "--samples", "2"]) == 0
+    frames = samples * 25 // 16_000
+    for number in (1, 2):
+        motion = np.load(out / f"sample-{number}" / "motion.npz")
+        assert motion["rotations"].shape == (frames, 9, 6)
+        assert motion["positions"].shape == (frames, 9, 3)
+        assert motion["activity"].shape == (frames,) and int(motion["fps"]) == 25
+    first = np.load(out / "sample-1" / "motion.npz")["rotations"]
+    assert not np.array_equal(first, np.load(out / "sample-2" / "motion.npz")["rotations"])
+    # a new process, the same seed: the same motion
+    import subprocess
+    import sys
+
+    again = tmp_path / "again"
+    command = [
+        sys.executable,
+        "-m",
+        "gesturelib",
+        *args[:-1],
+        str(again),
+        "--no-video",
+        "--samples",
+        "2",
+    ]
+    subprocess.run(command, check=True, capture_output=True)
+    np.testing.assert_array_equal(np.load(again / "sample-1" / "motion.npz")["rotations"], first)
+
+
+def test_generate_makes_a_video_with_sound_from_a_conversation(moglow_run, tiny_data, tmp_path):
+    stem = next((tiny_data / "test").glob("*.wav")).with_suffix("")
+    out = tmp_path / "video"
+    assert main(["generate", str(moglow_run), "--conversation", str(stem), "--out", str(out)]) == 0
+    assert (out / "agent.mp4").stat().st_size > 10_000 and (out / "motion.npz").exists()
+
+
+def test_generate_refuses_bad_input_in_one_line(moglow_run, tiny_data, tmp_path, capsys):
+    short = tmp_path / "click.wav"
+    from gesturelib.features import save_audio
+
+    save_audio(short, np.zeros(100, np.float32), 16_000)
+    cases = [
+        ["generate", str(moglow_run), "--audio", str(short), "--out", str(tmp_path / "a")],
+        [
+            "generate",
+            str(tmp_path / "nowhere"),
+            "--audio",
+            str(short),
+            "--out",
+            str(tmp_path / "b"),
+        ],
+        [
+            "generate",
+            str(moglow_run),
+            "--audio",
+            str(tmp_path / "missing.wav"),
+            "--out",
+            str(tmp_path / "c"),
+        ],
+        [
+            "generate",
+            str(moglow_run),
+            "--audio",
+            str(short),
+            "--out",
+            str(tmp_path / "d"),
+            "--style",
+            "hand_height=85",
+        ],
+        [
+            "generate",
+            str(moglow_run),
+            "--audio",
+            str(short),
+            "--out",
+            str(tmp_path / "e"),
+            "--temperature",
+            "-1",
+        ],
+    ]
+    for case in cases:
+        assert main(case) == 2, case
+        error = capsys.readouterr().err
+        assert error.startswith("gesturelib generate: error:") and error.count("\n") == 1, error
+
+
+def test_generate_refuses_a_run_of_a_model_that_does_not_generate(tiny_data, tmp_path, capsys):
+    run = tmp_path / "dae"
+    assert (
+        main(["train", "motion_dae", "--out", str(run), "--quick", "--data", str(tiny_data)]) == 0
+    )
+    write_wav(tmp_path / "speech.wav")
+    assert (
+        main(
+            [
+                "generate",
+                str(run),
+                "--audio",
+                str(tmp_path / "speech.wav"),
+                "--out",
+                str(tmp_path / "o"),
+            ]
+        )
+        == 2
+    )
+    assert "does not generate motion" in capsys.readouterr().err
+
+
+def test_train_into_a_folder_it_cannot_make_says_so_in_one_line(tiny_data, tmp_path, capsys):
+    blocker = tmp_path / "notes.txt"
+    blocker.write_text("a file where a folder would be needed")
+    out = blocker / "run"
+    assert main(["train", "aud2pose", "--out", str(out), "--quick", "--data", str(tiny_data)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert blocker.read_text() == "a file where a folder would be needed"

@@ -307,6 +307,9 @@ def test_checkpoint_round_trip(tmp_path):
         pose_std=np.ones(54, np.float32),
         speech_mean=np.full(27, 2.0, np.float32),
         speech_std=np.ones(27, np.float32),
+        style_mean=np.zeros(4, np.float32),
+        style_std=np.ones(4, np.float32),
+        style_percentiles=np.tile(np.arange(101.0)[:, None], (1, 4)),
     )
     model = make_model(hidden=6)
     history = train(model, TRAIN, VAL, config(), tmp_path, normaliser=normaliser, progress=False)
