@@ -1,0 +1,114 @@
+"""Measures of generated motion on held-out conversations, against the ground truth.
+
+The course's headline measures, computed the same way wherever a chapter or a benchmark reports
+them (``docs/architecture.md`` states the contract):
+
+* :func:`wrist_speed_hellinger`: how natural the motion's speeds are. Speeds of both wrists,
+  pooled over all frames of all conversations into one histogram of 4 cm/s bins from 0 to
+  400 cm/s, and its Hellinger distance (Kucherenko et al. 2021) to the ground truth's.
+* :func:`speaking_listening_ratio`: how much more the wrists move while the agent speaks than
+  while it listens (Taylor et al. 2021: listening moves towards the mean pose).
+* :func:`stroke_lead`: by how much the wrists' speed leads the emphasis of the agent's speech,
+  measured from the audio (``data_synth.measure_stroke_lead``); the generator's strokes lead
+  their accents by ``stroke_lead_s`` = 0.2 s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from gesturelib.conventions import FPS, Activity
+from gesturelib.metrics import JOINT_GROUPS, hellinger_distance, speed, speed_histogram
+
+#: Bin edges of the wrist-speed histograms, cm/s (faster speeds count in the last bin).
+WRIST_SPEED_BINS = np.arange(0.0, 404.0, 4.0)
+
+
+def wrist_speeds(positions: np.ndarray, fps: int = FPS) -> np.ndarray:
+    """Speeds of both wrists, ``(T - 1, 2)`` cm/s, from keypoints ``(T, 9, 3)``."""
+    return speed(positions, fps)[:, list(JOINT_GROUPS["wrists"])]
+
+
+def wrist_speed_histogram(motions: Sequence[np.ndarray], fps: int = FPS) -> np.ndarray:
+    """The normalised histogram of both wrists' speeds over all frames of ``motions``."""
+    speeds = np.concatenate([wrist_speeds(m, fps).ravel() for m in motions])
+    return speed_histogram(speeds, WRIST_SPEED_BINS)
+
+
+def wrist_speed_hellinger(
+    motions: Sequence[np.ndarray], truth: Sequence[np.ndarray], fps: int = FPS
+) -> float:
+    """Hellinger distance in [0, 1] between the wrist-speed histograms of ``motions`` and
+    ``truth`` (lists of ``(T, 9, 3)`` keypoints, e.g. one per held-out conversation)."""
+    return hellinger_distance(
+        wrist_speed_histogram(motions, fps), wrist_speed_histogram(truth, fps)
+    )
+
+
+def speaking_listening_ratio(positions, activity, fps: int = FPS) -> float:
+    """Mean wrist speed while the agent speaks over the mean while it does not.
+
+    Args:
+        positions: ``(T, 9, 3)`` keypoints, or a list of them (pooled).
+        activity: ``(T,)`` who-is-talking codes, or a list of them; a speed between frames
+            ``t - 1`` and ``t`` counts for frame ``t``'s activity. "Speaks" is ``A_SPEAKS`` or
+            ``BOTH``.
+    """
+    if isinstance(positions, np.ndarray) and positions.ndim == 3:
+        positions, activity = [positions], [activity]
+    speeds, speaking = [], []
+    for motion, codes in zip(positions, activity, strict=True):
+        speeds.append(wrist_speeds(motion, fps).mean(axis=1))
+        speaking.append(np.isin(np.asarray(codes)[1:], [Activity.A_SPEAKS, Activity.BOTH]))
+    speeds, speaking = np.concatenate(speeds), np.concatenate(speaking)
+    if speaking.all() or not speaking.any():
+        raise ValueError("the agent must both speak and listen for a speaking/listening ratio")
+    return float(speeds[speaking].mean() / speeds[~speaking].mean())
+
+
+def stroke_lead(
+    audio: np.ndarray, sample_rate: int, activity: np.ndarray, positions: np.ndarray
+) -> float:
+    """Seconds by which the wrists' speed leads the emphasis of the agent's speech (positive:
+    the gestures come first), by cross-correlation over lags of up to 0.6 s."""
+    from data_synth import measure_stroke_lead  # the audio's emphasis, as the generator defines it
+
+    return measure_stroke_lead(audio, sample_rate, activity, positions)
+
+
+def generate_for(conversations, model, normaliser, **options) -> list[np.ndarray]:
+    """Keypoints ``(samples, T, 9, 3)`` generated for each conversation from its audio and who is
+    talking (never its motion); ``options`` as for :func:`gesturelib.sampling.generate`."""
+    from gesturelib.features import mel_spectrogram
+    from gesturelib.sampling import generate
+    from gesturelib.skeleton import forward_kinematics
+
+    motions = []
+    for conversation in conversations:
+        speech = mel_spectrogram(conversation.audio, conversation.sample_rate)
+        rotations = generate(model, normaliser, speech, conversation.activity, **options)
+        motions.append(forward_kinematics(rotations))
+    return motions
+
+
+def headline_measures(conversations, motions: Sequence[np.ndarray]) -> dict[str, float]:
+    """The headline measures of ``motions`` (one ``(T, 9, 3)`` per conversation, e.g. a model's
+    samples or the ground truth itself) for the held-out ``conversations``.
+
+    Returns:
+        ``hellinger`` (wrist speeds against the conversations' own motion), ``ratio`` (speaking
+        over listening wrist speed, all conversations pooled) and ``lead`` (median over
+        conversations, seconds).
+    """
+    truth = [c.positions for c in conversations]
+    leads = [
+        stroke_lead(c.audio, c.sample_rate, c.activity, motion)
+        for c, motion in zip(conversations, motions, strict=True)
+    ]
+    return {
+        "hellinger": wrist_speed_hellinger(motions, truth),
+        "ratio": speaking_listening_ratio(list(motions), [c.activity for c in conversations]),
+        "lead": float(np.median(leads)),
+    }

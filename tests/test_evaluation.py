@@ -1,0 +1,57 @@
+"""gesturelib.evaluation on motions with a known answer."""
+
+import numpy as np
+import pytest
+
+from gesturelib.conventions import Activity
+from gesturelib.evaluation import (
+    WRIST_SPEED_BINS,
+    speaking_listening_ratio,
+    stroke_lead,
+    wrist_speed_hellinger,
+    wrist_speed_histogram,
+)
+from gesturelib.skeleton import JOINT_INDEX, t_pose
+
+WRISTS = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
+
+
+def moving(speed_cm_s: float, frames: int = 100) -> np.ndarray:
+    """Both wrists moving sideways at a constant speed."""
+    motion = np.repeat(t_pose()[None], frames, axis=0)
+    motion[:, WRISTS, 0] += speed_cm_s / 25 * np.arange(frames)[:, None]
+    return motion
+
+
+def test_the_histogram_has_4_cm_s_bins_to_400_and_keeps_faster_speeds():
+    assert WRIST_SPEED_BINS[1] == 4 and WRIST_SPEED_BINS[-1] == 400
+    histogram = wrist_speed_histogram([moving(10.0), moving(1000.0)])
+    assert histogram.sum() == pytest.approx(1.0)
+    assert histogram[2] == pytest.approx(0.5) and histogram[-1] == pytest.approx(0.5)
+
+
+def test_hellinger_is_zero_for_the_same_speeds_and_one_for_disjoint_ones():
+    assert wrist_speed_hellinger([moving(10.0)], [moving(10.0, frames=50)]) == pytest.approx(0.0)
+    assert wrist_speed_hellinger([moving(10.0)], [moving(50.0)]) == pytest.approx(1.0)
+    halves = wrist_speed_hellinger([moving(10.0), moving(50.0)], [moving(10.0)])
+    assert halves == pytest.approx(np.sqrt(1 - np.sqrt(0.5)))  # overlap of half the mass
+
+
+def test_the_speaking_listening_ratio_compares_mean_wrist_speeds():
+    motion = np.repeat(t_pose()[None], 101, axis=0)
+    step = np.where(np.arange(101) < 51, 3.0, 1.0) / 25  # 3 cm/s for 50 speeds, then 1 cm/s
+    motion[:, WRISTS, 1] += np.cumsum(step)[:, None]
+    activity = np.where(np.arange(101) <= 50, Activity.A_SPEAKS, Activity.B_SPEAKS)
+    assert speaking_listening_ratio(motion, activity) == pytest.approx(3.0)
+    with pytest.raises(ValueError, match="both speak and listen"):
+        speaking_listening_ratio(motion, np.full(101, Activity.A_SPEAKS))
+
+
+def test_the_stroke_lead_of_the_generators_motion_is_its_rule():
+    from data_synth import generate_conversation
+
+    conversation = generate_conversation(30.0, seed=4)
+    lead = stroke_lead(
+        conversation.audio, conversation.sample_rate, conversation.activity, conversation.positions
+    )
+    assert 0.1 <= lead <= 0.3  # the rule: 0.2 s
