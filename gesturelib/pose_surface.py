@@ -36,10 +36,24 @@ T_POSE_DIRECTIONS = T_POSE_OFFSETS / np.linalg.norm(T_POSE_OFFSETS, axis=1, keep
 
 
 def _rot6d_of_directions(directions: torch.Tensor) -> torch.Tensor:
-    """The 6D rotations ``(..., 9, 6)`` of limbs pointing along ``directions`` ``(..., 9, 3)``."""
+    """The 6D rotations ``(..., 9, 6)`` of limbs pointing along unit ``directions``
+    ``(..., 9, 3)``: the first two rows of the shortest arc from each T-pose limb.
+
+    Generation calls this every frame, so it is the closed form of Rodrigues' formula for unit
+    vectors, ``R = c I + [k]x + k k^T / (1 + c)`` with ``k = s x d`` and ``c = s . d``, a handful
+    of operations; a limb turned right round (``c = -1``, no unique axis) goes to
+    :func:`~gesturelib.rotations.shortest_arc`.
+    """
     source = torch.as_tensor(T_POSE_DIRECTIONS, dtype=directions.dtype, device=directions.device)
-    matrices = shortest_arc(source, directions)
-    return matrices[..., :2, :].flatten(-2)  # 6D: the first two rows
+    cos = (source * directions).sum(-1, keepdim=True)  # (..., 9, 1)
+    if bool((cos < -1.0 + 1e-6).any()):
+        return shortest_arc(source, directions)[..., :2, :].flatten(-2)
+    k = torch.linalg.cross(source.expand_as(directions), directions, dim=-1)
+    kx, ky, kz = k.unbind(-1)
+    # Rows 0 and 1 of c I + [k]x, then + (k_0, k_1)^T k / (1 + c).
+    rows = torch.cat([cos, -kz[..., None], ky[..., None], kz[..., None], cos, -kx[..., None]], -1)
+    rows = rows + (k[..., :2, None] * k[..., None, :]).flatten(-2) / (1.0 + cos)
+    return rows
 
 
 def limb_directions(rot6d: torch.Tensor) -> torch.Tensor:

@@ -131,7 +131,7 @@ class Stream:
         poses = []
         window = self.speech_past + 1 + self.speech_future
         entered = getattr(self.model, "generating", contextlib.nullcontext)
-        with entered(), torch.no_grad():
+        with entered(), torch.inference_mode():
             while self.next_frame < until:
                 start = self.next_frame - self.speech_past - self.first  # its window's first row
                 frame = {

@@ -303,14 +303,17 @@ def test_linear_inverse_follows_the_parameters_after_an_optimiser_step(lu):
     assert (layer.weight_matrix() @ layer.inverse_matrix() - torch.eye(5)).abs().max() < 1e-12
 
 
-def test_fixed_weights_computes_each_inverse_once_and_forgets_it_after():
+@pytest.mark.parametrize("shape", [(6,), (2, 3)])
+def test_fixed_weights_computes_each_inverse_once_and_forgets_it_after(shape):
     flow = randomise(glow(DIM, 3, 8).double())
-    z = torch.randn(6, DIM, dtype=torch.float64)
-    expected = flow.inverse(z)[0]
+    z = torch.randn(*shape, DIM, dtype=torch.float64)
+    expected, expected_logdet = flow.inverse(z)
     with flow.fixed_weights():
-        assert all(step.linear.fixed_inverse is not None for step in flow.steps)
-        torch.testing.assert_close(flow.inverse(z)[0], expected)
-    assert all(step.linear.fixed_inverse is None for step in flow.steps)
+        assert all(step.fixed is not None for step in flow.steps)
+        x, logdet = flow.inverse(z)
+        torch.testing.assert_close(x, expected)
+        torch.testing.assert_close(logdet, expected_logdet)
+    assert all(step.fixed is None for step in flow.steps)
 
 
 # ------------------------------------------------------------------------------- densities

@@ -11,7 +11,8 @@ from data_synth import generate_conversation
 from gesturelib.data import ConversationFeatures, Normaliser, WindowConfig, WindowDataset
 from gesturelib.features import mel_spectrogram
 from gesturelib.models import MoGlow, MoGlowConfig
-from gesturelib.pose_surface import SurfaceNoise, project
+from gesturelib.pose_surface import T_POSE_DIRECTIONS, SurfaceNoise, limb_directions, project
+from gesturelib.rotations import shortest_arc
 from gesturelib.sampling import Stream, generate
 from gesturelib.skeleton import forward_kinematics
 
@@ -135,6 +136,19 @@ def test_project_keeps_poses_on_the_surface_and_returns_others_to_it(data):
     again = project(off)
     torch.testing.assert_close(project(again), again)
     np.testing.assert_allclose(forward_kinematics(again), forward_kinematics(off), atol=1e-6)
+
+
+def test_project_turns_each_limb_by_its_shortest_arc_even_right_round():
+    directions = torch.nn.functional.normalize(
+        torch.randn(20, 9, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(3)),
+        dim=-1,
+    )
+    directions[0, 1] = -torch.as_tensor(T_POSE_DIRECTIONS[1])  # the left shoulder reversed
+    for poses in (directions[1:], directions):  # the closed form, and the fallback
+        arcs = shortest_arc(torch.as_tensor(T_POSE_DIRECTIONS), poses)
+        expected = arcs[..., :2, :].flatten(-2)
+        torch.testing.assert_close(project(expected), expected)
+        torch.testing.assert_close(limb_directions(project(expected)), poses)
 
 
 def generation_setup(data):

@@ -26,6 +26,7 @@ import contextlib
 from collections.abc import Sequence
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from gesturelib.flows.actnorm import ActNorm
@@ -70,6 +71,7 @@ class FlowStep(nn.Module):
         self.actnorm = ActNorm(dim)
         self.linear = InvertibleLinear(dim, generator=generator, init=linear_init)
         self.coupling = COUPLINGS[coupling](dim, cond_dim, hidden)
+        self.fixed = None  # set only inside Flow.fixed_weights()
 
     def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None):
         """Data -> noise: ``(y, logdet (B,))``, the three layers' log-determinants summed."""
@@ -81,9 +83,25 @@ class FlowStep(nn.Module):
     def inverse(self, z: torch.Tensor, cond: torch.Tensor | None = None):
         """Noise -> data: coupling^-1, linear^-1, ActNorm^-1; ``(x, logdet (B,))``."""
         z, logdet_coupling = self.coupling.inverse(z, cond)
-        z, logdet_linear = self.linear.inverse(z)
-        z, logdet_actnorm = self.actnorm.inverse(z)
-        return z, logdet_actnorm + logdet_linear + logdet_coupling
+        z, logdet = invert_linear_and_actnorm(self, z)
+        return z, logdet + logdet_coupling
+
+
+def invert_linear_and_actnorm(
+    step: nn.Module, z: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """A step's linear^-1 then ActNorm^-1 (noise -> data): ``(x, logdet (B,))``.
+
+    Inside :meth:`FlowBase.fixed_weights` the two are one affine map, computed once: frame-by-frame
+    sampling calls this for every step of every frame.
+    """
+    if step.fixed is None:
+        z, logdet_linear = step.linear.inverse(z)
+        z, logdet_actnorm = step.actnorm.inverse(z)
+        return z, logdet_linear + logdet_actnorm
+    matrix, bias, logdet = step.fixed
+    frames = z.shape[1] if z.dim() == 3 else 1
+    return F.linear(z, matrix, bias), (frames * logdet).expand(z.shape[0])
 
 
 class FlowBase(nn.Module):
@@ -134,17 +152,23 @@ class FlowBase(nn.Module):
     @contextlib.contextmanager
     def fixed_weights(self):
         """Within ``with flow.fixed_weights():`` no gradients are taken and the weights must not
-        change, so each linear layer's inverse is computed once: what frame-by-frame sampling
-        needs to be fast. Outside it, every call recomputes the inverse from the weights."""
-        linears = [step.linear for step in self.steps]
+        change, so each step's linear^-1 and ActNorm^-1 are computed once, as one affine map
+        ``x = diag(exp(-s)) W^-1 y + loc``: what frame-by-frame sampling needs to be fast.
+        Outside it, every call recomputes them from the weights."""
         with torch.no_grad():
-            for linear in linears:
-                linear.fixed_inverse = linear.inverse_matrix()
+            for step in self.steps:
+                scale = torch.exp(-step.actnorm.log_scale)
+                logdet = -(step.actnorm.log_scale.sum() + step.linear.log_abs_det())
+                step.fixed = (
+                    scale[:, None] * step.linear.inverse_matrix(),
+                    step.actnorm.loc,
+                    logdet,
+                )
             try:
                 yield self
             finally:
-                for linear in linears:
-                    linear.fixed_inverse = None
+                for step in self.steps:
+                    step.fixed = None
 
 
 class Flow(FlowBase):

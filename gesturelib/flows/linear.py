@@ -25,8 +25,8 @@ log-determinant is zero:
   both).
 
 The inverse matrix is computed in float64 from the current parameters on every call, so it cannot
-go stale after an optimiser step; only inside :meth:`~gesturelib.flows.Flow.fixed_weights`, where
-the weights are promised not to change, is it computed once (frame-by-frame sampling needs that).
+go stale after an optimiser step (:meth:`~gesturelib.flows.Flow.fixed_weights` computes it once
+where the weights are promised not to change, for frame-by-frame sampling).
 """
 
 from __future__ import annotations
@@ -81,7 +81,6 @@ class InvertibleLinear(nn.Module):
         else:
             start = torch.eye(dim, dtype=torch.float64).flip(0)
         dtype = torch.get_default_dtype()
-        self.fixed_inverse: torch.Tensor | None = None  # set only inside Flow.fixed_weights()
         if not lu:
             self.weight = nn.Parameter(start.to(dtype))
             return
@@ -130,8 +129,7 @@ class InvertibleLinear(nn.Module):
 
     def inverse(self, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Noise -> data: ``x = W^-1 y`` for every frame. Returns ``(x, logdet (B,))``."""
-        matrix = self.fixed_inverse if self.fixed_inverse is not None else self.inverse_matrix()
-        return F.linear(y, matrix), self._logdet(y, -1.0)
+        return F.linear(y, self.inverse_matrix()), self._logdet(y, -1.0)
 
     def _logdet(self, x: torch.Tensor, sign: float) -> torch.Tensor:
         frames = x.shape[1] if x.dim() == 3 else 1

@@ -27,7 +27,7 @@ from gesturelib.flows.base import StandardNormal, StudentT
 from gesturelib.flows.checks import sum_per_sample
 from gesturelib.flows.conditioners import ConditionerState
 from gesturelib.flows.coupling import RecurrentCoupling
-from gesturelib.flows.flow import FlowBase
+from gesturelib.flows.flow import FlowBase, invert_linear_and_actnorm
 from gesturelib.flows.linear import InvertibleLinear
 
 #: A recurrent flow's state: one :data:`ConditionerState` per step.
@@ -59,6 +59,7 @@ class RecurrentFlowStep(nn.Module):
         self.coupling = RecurrentCoupling(
             dim, cond_dim, hidden, cell=cell, num_layers=num_layers, additive=additive
         )
+        self.fixed = None  # set only inside RecurrentFlow.fixed_weights()
 
     def forward(self, x, cond=None, state: ConditionerState = None):
         """Data -> noise: ``(y, logdet (B,), state)``."""
@@ -70,9 +71,8 @@ class RecurrentFlowStep(nn.Module):
     def inverse(self, z, cond=None, state: ConditionerState = None):
         """Noise -> data: ``(x, logdet (B,), state)``."""
         z, logdet_coupling, state = self.coupling.inverse(z, cond, state)
-        z, logdet_linear = self.linear.inverse(z)
-        z, logdet_actnorm = self.actnorm.inverse(z)
-        return z, logdet_actnorm + logdet_linear + logdet_coupling, state
+        z, logdet = invert_linear_and_actnorm(self, z)
+        return z, logdet + logdet_coupling, state
 
 
 class RecurrentFlow(FlowBase):
