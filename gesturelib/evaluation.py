@@ -55,6 +55,8 @@ def speaking_listening_ratio(positions, activity, fps: int = FPS) -> float:
         activity: ``(T,)`` who-is-talking codes, or a list of them; a speed between frames
             ``t - 1`` and ``t`` counts for frame ``t``'s activity. "Speaks" is ``A_SPEAKS`` or
             ``BOTH``.
+    Returns:
+        The ratio; NaN where it is undefined (wrists that never move while listening).
     """
     if isinstance(positions, np.ndarray) and positions.ndim == 3:
         positions, activity = [positions], [activity]
@@ -65,17 +67,52 @@ def speaking_listening_ratio(positions, activity, fps: int = FPS) -> float:
     speeds, speaking = np.concatenate(speeds), np.concatenate(speaking)
     if speaking.all() or not speaking.any():
         raise ValueError("the agent must both speak and listen for a speaking/listening ratio")
-    return float(speeds[speaking].mean() / speeds[~speaking].mean())
+    listening = speeds[~speaking].mean()
+    return float(speeds[speaking].mean() / listening) if listening > 0 else float("nan")
 
 
 def stroke_lead(
     audio: np.ndarray, sample_rate: int, activity: np.ndarray, positions: np.ndarray
 ) -> float:
     """Seconds by which the wrists' speed leads the emphasis of the agent's speech (positive:
-    the gestures come first), by cross-correlation over lags of up to 0.6 s."""
+    the gestures come first), by cross-correlation over lags of up to 0.6 s; NaN for wrists that
+    never move (a lead is then undefined)."""
     from data_synth import measure_stroke_lead  # the audio's emphasis, as the generator defines it
 
+    if np.ptp(wrist_speeds(positions).sum(axis=1)) == 0:
+        return float("nan")
     return measure_stroke_lead(audio, sample_rate, activity, positions)
+
+
+def reference_motions(conversations, mean_pose: np.ndarray, seed: int = 0) -> dict[str, list]:
+    """The references every model is compared with, keypoints ``(T, 9, 3)`` per conversation:
+
+    * ``floor``: the generator's motion drawn again for the same speech
+      (``data_synth.resample_motion``): as natural and as appropriate as motion can be, yet not
+      the recorded one; no model can be expected to beat it;
+    * ``mismatched``: the recorded motion of the next conversation (cut or repeated to length):
+      natural, but for other speech;
+    * ``mean_pose``: ``mean_pose`` ``(9, 3)`` held still.
+
+    Args:
+        conversations: the held-out conversations (at least 2, for ``mismatched``).
+        mean_pose: keypoints ``(9, 3)``, e.g. of the training data's mean pose.
+        seed: motion seeds of the floor are ``seed, seed + 1, ...``.
+    """
+    from data_synth import resample_motion
+
+    if len(conversations) < 2:
+        raise ValueError("mismatched motion needs at least 2 conversations")
+    mean_pose = np.asarray(mean_pose, dtype=np.float64)
+    if mean_pose.shape != (9, 3):
+        raise ValueError(f"mean_pose must be keypoints (9, 3), got {mean_pose.shape}")
+    lengths = [len(c.positions) for c in conversations]
+    others = [conversations[(i + 1) % len(conversations)].positions for i in range(len(lengths))]
+    return {
+        "floor": [resample_motion(c, seed + i).positions for i, c in enumerate(conversations)],
+        "mismatched": [np.resize(o, (n, 9, 3)) for o, n in zip(others, lengths, strict=True)],
+        "mean_pose": [np.repeat(mean_pose[None], n, axis=0) for n in lengths],
+    }
 
 
 def generate_for(conversations, model, normaliser, **options) -> list[np.ndarray]:
@@ -100,7 +137,7 @@ def headline_measures(conversations, motions: Sequence[np.ndarray]) -> dict[str,
     Returns:
         ``hellinger`` (wrist speeds against the conversations' own motion), ``ratio`` (speaking
         over listening wrist speed, all conversations pooled) and ``lead`` (median over
-        conversations, seconds).
+        conversations, seconds); NaN where undefined (a motion that never moves has no lead).
     """
     truth = [c.positions for c in conversations]
     leads = [
@@ -110,5 +147,5 @@ def headline_measures(conversations, motions: Sequence[np.ndarray]) -> dict[str,
     return {
         "hellinger": wrist_speed_hellinger(motions, truth),
         "ratio": speaking_listening_ratio(list(motions), [c.activity for c in conversations]),
-        "lead": float(np.median(leads)),
+        "lead": float(np.median(leads)) if not np.isnan(leads).any() else float("nan"),
     }

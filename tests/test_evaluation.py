@@ -55,3 +55,23 @@ def test_the_stroke_lead_of_the_generators_motion_is_its_rule():
         conversation.audio, conversation.sample_rate, conversation.activity, conversation.positions
     )
     assert 0.1 <= lead <= 0.3  # the rule: 0.2 s
+
+
+def test_the_references_rank_as_they_must_on_the_headline_measures():
+    from data_synth import generate_conversation
+    from gesturelib.evaluation import headline_measures, reference_motions
+
+    conversations = [generate_conversation(30.0, seed=seed) for seed in (4, 5)]
+    mean_pose = np.mean([c.positions.mean(0) for c in conversations], axis=0)
+    references = reference_motions(conversations, mean_pose, seed=7)
+    assert all(len(r) == 2 for r in references.values())
+    assert not np.allclose(references["floor"][0], conversations[0].positions)
+    np.testing.assert_array_equal(references["mismatched"][0], conversations[1].positions)
+    scores = {name: headline_measures(conversations, m) for name, m in references.items()}
+    truth = headline_measures(conversations, [c.positions for c in conversations])
+    assert truth["hellinger"] == 0.0
+    assert scores["floor"]["hellinger"] < 0.2 < scores["mean_pose"]["hellinger"]
+    assert abs(scores["floor"]["lead"] - 0.2) < 0.1  # the floor keeps the rule
+    assert np.isnan(scores["mean_pose"]["ratio"]) and np.isnan(scores["mean_pose"]["lead"])
+    with pytest.raises(ValueError, match="at least 2"):
+        reference_motions(conversations[:1], mean_pose)
