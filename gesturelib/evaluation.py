@@ -84,33 +84,43 @@ def stroke_lead(
     return measure_stroke_lead(audio, sample_rate, activity, positions)
 
 
-def reference_motions(conversations, mean_pose: np.ndarray, seed: int = 0) -> dict[str, list]:
+def reference_motions(
+    conversations, mean_pose: np.ndarray, seed: int = 0, others=None
+) -> dict[str, list]:
     """The references every model is compared with, keypoints ``(T, 9, 3)`` per conversation:
 
     * ``floor``: the generator's motion drawn again for the same speech
       (``data_synth.resample_motion``): as natural and as appropriate as motion can be, yet not
       the recorded one; no model can be expected to beat it;
-    * ``mismatched``: the recorded motion of the next conversation (cut or repeated to length):
+    * ``mismatched``: the recorded motion of another conversation (cut or repeated to length):
       natural, but for other speech;
     * ``mean_pose``: ``mean_pose`` ``(9, 3)`` held still.
 
     Args:
-        conversations: the held-out conversations (at least 2, for ``mismatched``).
+        conversations: the held-out conversations.
         mean_pose: keypoints ``(9, 3)``, e.g. of the training data's mean pose.
         seed: motion seeds of the floor are ``seed, seed + 1, ...``.
+        others: the conversations whose motion is mismatched, one per conversation (e.g. from
+            another split); by default each conversation gets the next one's, which needs two.
     """
     from data_synth import resample_motion
 
-    if len(conversations) < 2:
-        raise ValueError("mismatched motion needs at least 2 conversations")
+    if others is None:
+        if len(conversations) < 2:
+            raise ValueError("mismatched motion needs at least 2 conversations, or others=")
+        others = [conversations[(i + 1) % len(conversations)] for i in range(len(conversations))]
+    if len(others) < len(conversations):
+        raise ValueError(f"others must give {len(conversations)} conversations, got {len(others)}")
     mean_pose = np.asarray(mean_pose, dtype=np.float64)
     if mean_pose.shape != (9, 3):
         raise ValueError(f"mean_pose must be keypoints (9, 3), got {mean_pose.shape}")
     lengths = [len(c.positions) for c in conversations]
-    others = [conversations[(i + 1) % len(conversations)].positions for i in range(len(lengths))]
     return {
         "floor": [resample_motion(c, seed + i).positions for i, c in enumerate(conversations)],
-        "mismatched": [np.resize(o, (n, 9, 3)) for o, n in zip(others, lengths, strict=True)],
+        "mismatched": [
+            np.resize(o.positions, (n, 9, 3))
+            for o, n in zip(others[: len(lengths)], lengths, strict=True)
+        ],
         "mean_pose": [np.repeat(mean_pose[None], n, axis=0) for n in lengths],
     }
 

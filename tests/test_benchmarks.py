@@ -58,3 +58,15 @@ def test_flow_speed_benchmark_runs():
     output = run("bench_flows.py", "--repeats", "1", "--hidden", "8", "--frames", "4")
     rows = [row.split()[0] for row in output.splitlines()[3:]]
     assert rows == ["MLP", "LSTM"], output
+
+
+def test_moglow_benchmark_measures_a_run_against_the_references(moglow_run):
+    output = run("bench_moglow.py", str(moglow_run), "--samples", "2")
+    for row in ("parameters", "training", "streaming, 1 sample", "streaming, 8 sample"):
+        assert any(line.startswith(row) for line in output.splitlines()), output
+    systems = ("ground truth", "floor", "mismatched", "mean_pose", "MoGlow, T = 1")
+    for system in systems:
+        line = next(line for line in output.splitlines() if line.startswith(system))
+        assert re.search(r"hellinger +\d\.\d{3} ± .*ratio .*lead ", line), line
+    refused = launch("bench_moglow.py", str(moglow_run / "missing"), "--samples", "0")
+    assert refused.returncode == 2 and "--samples must be at least 1, got 0" in refused.stderr

@@ -47,22 +47,6 @@ def test_demo_rejects_a_non_positive_length(tmp_path, capsys):
 # ---------------------------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def tiny_data(tmp_path_factory):
-    from data_synth import write_dataset
-
-    folder = tmp_path_factory.mktemp("data")
-    write_dataset(folder, minutes=0.5, seed=0, conversation_s=10.0, progress=False)
-    return folder
-
-
-@pytest.fixture(scope="module")
-def moglow_run(tmp_path_factory, tiny_data):
-    run = tmp_path_factory.mktemp("runs") / "moglow"
-    assert main(["train", "moglow", "--out", str(run), "--quick", "--data", str(tiny_data)]) == 0
-    return run
-
-
 def test_train_writes_a_run_folder_that_info_describes(moglow_run, capsys):
     assert {"best.pt", "last.pt", "run.json"} <= {p.name for p in moglow_run.iterdir()}
     summary = json.loads((moglow_run / "run.json").read_text())

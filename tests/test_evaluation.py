@@ -75,3 +75,5 @@ def test_the_references_rank_as_they_must_on_the_headline_measures():
     assert np.isnan(scores["mean_pose"]["ratio"]) and np.isnan(scores["mean_pose"]["lead"])
     with pytest.raises(ValueError, match="at least 2"):
         reference_motions(conversations[:1], mean_pose)
+    alone = reference_motions(conversations[:1], mean_pose, others=conversations[1:])
+    np.testing.assert_array_equal(alone["mismatched"][0], conversations[1].positions)

@@ -1,0 +1,183 @@
+"""MoGlow on this machine: training speed, streaming speed, size, and its motion on held-out speech.
+
+Measures a run folder that ``python -m gesturelib train moglow --out RUN`` wrote:
+
+* training: frames per second (the training frames of all epochs over the training time the run
+  recorded) and the training time itself;
+* generation: how many times faster than real time (25 fps) one motion streams frame by frame on
+  one core, and a batch of 8 samples for the same speech;
+* parameters;
+* on the held-out test conversations, at the temperatures asked for (K samples each): the
+  headline measures of :mod:`gesturelib.evaluation` (wrist-speed Hellinger distance to the ground
+  truth, speaking/listening wrist-speed ratio, stroke lead over the speech's accents), beside the
+  ground truth and the references (the floor of resampled motion, mismatched motion, the mean
+  pose; the mismatched motion comes from the validation conversations). Mean ± sd over the
+  samples;
+* for a model with style control: the style realised in its samples when each feature is held at
+  the 15th, 50th and 85th percentile of the training values (the others at their median), and the
+  rank correlation between requested and realised levels over conversations and samples.
+
+Usage (a missing run folder is trained first, with ``python -m gesturelib train moglow``):
+    .venv/bin/python benchmarks/bench_moglow.py [RUN] [--temperatures 1.0 0.8] [--samples 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from data_synth import load_dataset
+from gesturelib import cli
+from gesturelib.data import make_datasets
+from gesturelib.evaluation import generate_for, headline_measures, reference_motions
+from gesturelib.features import mel_spectrogram
+from gesturelib.history import History
+from gesturelib.pose_surface import project
+from gesturelib.recipes import RECIPES
+from gesturelib.sampling import generate
+from gesturelib.skeleton import forward_kinematics
+from gesturelib.style import STYLE_FEATURES, style_features
+
+MEASURES = ("hellinger", "ratio", "lead")
+
+
+def training_speed(run: Path, checkpoint, splits) -> tuple[float, float]:
+    """``(training seconds, training frames per second)`` of a run folder."""
+    summary = json.loads((run / "run.json").read_text())
+    windows, _, _ = RECIPES["moglow"].settings(summary["quick"])
+    datasets, _ = make_datasets({"train": splits["train"]}, windows)
+    history = History.from_dict(checkpoint["history"])
+    seconds = sum(history.epoch_seconds)
+    frames = len(datasets["train"]) * windows.sequence_length * history.epochs
+    return seconds, frames / seconds
+
+
+def streaming_speed(model, normaliser, conversation, samples: int) -> float:
+    """How many times faster than real time ``samples`` motions of 20 s stream (best of 3)."""
+    speech = mel_spectrogram(conversation.audio, conversation.sample_rate)[:500]
+    activity = conversation.activity[:500]
+    best = float("inf")
+    for _ in range(3):
+        started = time.perf_counter()
+        generate(model, normaliser, speech, activity, samples=samples, seed=0)
+        best = min(best, time.perf_counter() - started)
+    return len(speech) / 25 / best
+
+
+def summarise(scores: list[dict]) -> str:
+    """``measure mean ± sd`` over samples, for each headline measure."""
+    parts = []
+    for name in MEASURES:
+        values = [s[name] for s in scores]
+        spread = statistics.stdev(values) if len(values) > 1 else 0.0
+        parts.append(f"{name} {statistics.mean(values):7.3f} ± {spread:.3f}")
+    return "   ".join(parts)
+
+
+def rank_correlation(a, b) -> float:
+    """Spearman's rank correlation of two 1D arrays (ties get their mean rank)."""
+
+    def ranks(x):
+        x = np.asarray(x, dtype=np.float64)
+        order = np.argsort(x, kind="stable")
+        rank = np.empty(len(x))
+        rank[order] = np.arange(len(x))
+        for value in np.unique(x):  # ties: their mean rank
+            rank[x == value] = rank[x == value].mean()
+        return rank
+
+    return float(np.corrcoef(ranks(a), ranks(b))[0, 1])
+
+
+def style_control(model, normaliser, conversations, samples: int, temperature: float):
+    """Requested vs realised level of each style feature: prints a table, returns the rank
+    correlations."""
+    correlations = {}
+    for index, name in enumerate(STYLE_FEATURES):
+        requested, realised = [], []
+        for percentile in (15, 50, 85):
+            style = normaliser.style_at_percentiles({name: percentile})
+            motions = generate_for(
+                conversations,
+                model,
+                normaliser,
+                samples=samples,
+                temperature=temperature,
+                seed=0,
+                style=style,
+            )
+            for motion in motions:
+                for sample in motion:
+                    requested.append(style[index])
+                    realised.append(style_features(sample)[:, index].mean())
+        correlations[name] = rank_correlation(requested, realised)
+        levels = np.array(realised).reshape(3, -1).mean(axis=1)
+        targets = sorted(set(requested))
+        print(
+            f"  {name:15} requested {' / '.join(f'{t:7.2f}' for t in targets)}   realised "
+            f"{' / '.join(f'{v:7.2f}' for v in levels)}   rank correlation "
+            f"{correlations[name]:.2f}"
+        )
+    return correlations
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "run", type=Path, nargs="?", default=Path("runs/moglow"), help="a MoGlow run folder"
+    )
+    parser.add_argument("--temperatures", type=float, nargs="+", default=[1.0])
+    parser.add_argument("--samples", type=int, default=3, help="samples per conversation")
+    args = parser.parse_args()
+    if args.samples < 1:
+        parser.error(f"--samples must be at least 1, got {args.samples}")
+    if not (args.run / "best.pt").exists():
+        print(f"{args.run} holds no trained model: training one")
+        if cli.main(["train", "moglow", "--out", str(args.run)]) != 0:
+            raise SystemExit(2)
+    torch.set_num_threads(1)
+    model, normaliser, checkpoint = cli.load_run(args.run)
+    if type(model).__name__ != "MoGlow":
+        parser.error(f"{args.run} holds a {type(model).__name__}, not a MoGlow")
+    summary = json.loads((args.run / "run.json").read_text())
+    splits = load_dataset(summary["data"])
+    test = splits["test"]
+    seconds, frames_per_second = training_speed(args.run, checkpoint, splits)
+    parameters = sum(p.numel() for p in model.parameters())
+    print(f"run {args.run}: {json.dumps(checkpoint['model_config'])}")
+    print(f"parameters {parameters:,}")
+    print(f"training {seconds / 60:.1f} min, {frames_per_second:,.0f} frames/s (one thread)")
+    for samples in (1, 8):
+        speed = streaming_speed(model, normaliser, test[0], samples)
+        print(f"streaming, {samples} sample(s) at once: {speed:.1f}x real time (one thread)")
+
+    test_s = sum(len(c.positions) for c in test) / 25
+    print(f"\nheld-out: {len(test)} test conversations, {test_s:.0f} s in all")
+    truth = [c.positions for c in test]
+    print(f"{'ground truth':22} {summarise([headline_measures(test, truth)])}")
+    raw_mean = torch.as_tensor(normaliser.pose_mean, dtype=torch.float64).reshape(9, 6)
+    mean_pose = forward_kinematics(project(raw_mean).numpy())
+    for name, motions in reference_motions(
+        test, mean_pose, seed=1000, others=splits["val"]
+    ).items():
+        print(f"{name:22} {summarise([headline_measures(test, motions)])}")
+    for temperature in args.temperatures:
+        motions = generate_for(
+            test, model, normaliser, samples=args.samples, temperature=temperature, seed=0
+        )
+        scores = [headline_measures(test, [m[k] for m in motions]) for k in range(args.samples)]
+        label = f"MoGlow, T = {temperature:g}"
+        print(f"{label:22} {summarise(scores)}   ({args.samples} samples)")
+    if model.config.style:
+        print(f"\nstyle control (T = {args.temperatures[0]:g}):")
+        style_control(model, normaliser, test, args.samples, args.temperatures[0])
+
+
+if __name__ == "__main__":
+    main()
