@@ -13,7 +13,9 @@
 
 Views: the agent faces +z with y up, so the *front* view (x horizontal, y up) shows the agent as a
 person facing you: its left hand (+x) on your right. The *side* view (z horizontal, y up) shows the
-agent facing right.
+agent facing right, seen from its right side: its right arm is the nearer one and would hide the
+left arm wherever the two overlap, so the far arm is drawn on top of it, thinner
+(:data:`FAR_ARM_WIDTH`), and both stay visible.
 """
 
 from __future__ import annotations
@@ -47,29 +49,47 @@ ACTIVITY_COLOURS = {
 
 #: Bone colours: the agent's left side, its right side, and the midline (spine, neck, head).
 SIDE_COLOURS = {"left": "#1f77b4", "right": "#d62728", "midline": "#444444"}
+#: The side of the agent that is further from you in each view (None: neither, in the front view).
+FAR_SIDE = {"front": None, "side": "left"}
+#: The far arm's line width, as a fraction of the near arm's: drawn on top, it leaves the near arm
+#: showing on both sides of it.
+FAR_ARM_WIDTH = 0.5
 #: Every animation is at least this wide, whatever its number of panels and its dpi.
 MIN_ANIMATION_WIDTH_PX = 720
 #: Width and height of one view of an animation, in inches (360 x 400 pixels at 100 dpi).
 _ANIMATION_PANEL_INCHES = (3.6, 4.0)
 
 
-def _bone_colour(child: int) -> str:
+def _bone_side(child: int) -> str:
+    """``"left"``, ``"right"`` or ``"midline"``: where the bone ending at ``child`` is."""
     side = KEYPOINTS[child].split("_")[0]
-    return SIDE_COLOURS[side if side in ("left", "right") else "midline"]
+    return side if side in ("left", "right") else "midline"
 
 
-def side_legend(target, **legend_options):
+def _bone_colour(child: int) -> str:
+    return SIDE_COLOURS[_bone_side(child)]
+
+
+def side_legend(target, extra=(), **legend_options):
     """Add a legend naming the bone colours, "left arm" and "right arm", to a figure or an axes.
 
     The sides are the agent's own: in the front view its left arm is on your right.
-    ``legend_options`` go to ``target.legend`` (by default: lower right, in one row, no frame).
-    Returns the ``Legend``.
+    ``extra`` handles (e.g. a ``Line2D`` for a reference pose drawn in one colour) follow the two
+    arms in the same legend. ``legend_options`` go to ``target.legend`` (by default: lower right,
+    in one row, no frame). Returns the ``Legend``.
     """
     handles = [
         Line2D([], [], color=SIDE_COLOURS[side], linewidth=3, label=f"{side} arm")
         for side in ("left", "right")
     ]
-    options = {"loc": "lower right", "ncol": 2, "fontsize": 9, "frameon": False, **legend_options}
+    handles += list(extra)
+    options = {
+        "loc": "lower right",
+        "ncol": len(handles),
+        "fontsize": 9,
+        "frameon": False,
+        **legend_options,
+    }
     return target.legend(handles=handles, **options)
 
 
@@ -101,9 +121,22 @@ def _axis_limits(positions: np.ndarray, view: str, margin: float = 10.0):
 
 
 def _skeleton_lines(ax, view: str, **line_style) -> list:
-    """One ``Line2D`` per bone, empty; :func:`_update_lines` fills them with a pose."""
+    """One ``Line2D`` per bone, empty; :func:`_update_lines` fills them with a pose.
+
+    The bones take their side's colour unless ``line_style`` has a ``color`` for all of them; the
+    arm on the view's far side (:data:`FAR_SIDE`) is drawn thinner and on top of the near one.
+    """
     style = {"linewidth": 3, "marker": "o", "markersize": 3, **line_style}
-    return [ax.plot([], [], color=_bone_colour(child), **style)[0] for _, child in BONES]
+    colour = style.pop("color", None)
+    lines = []
+    for _, child in BONES:
+        bone_style = dict(style)
+        if _bone_side(child) == FAR_SIDE[view]:
+            bone_style["linewidth"] = FAR_ARM_WIDTH * style["linewidth"]
+            bone_style["zorder"] = bone_style.get("zorder", 2) + 0.1
+        line = ax.plot([], [], color=colour or _bone_colour(child), **bone_style)[0]
+        lines.append(line)
+    return lines
 
 
 def _update_lines(lines: list, pose: np.ndarray, view: str) -> list:
@@ -131,10 +164,20 @@ def _style_animation_axis(ax, view: str, limits) -> None:
     ax.set_aspect("equal")
     ax.set_axis_off()
     ax.set_title(f"{view} view", fontsize=9)
-    # A 50 cm scale bar in the lower left corner instead of axes.
+    # A 50 cm scale bar in the lower left corner instead of axes, its label underneath, where no
+    # keypoint is (the root, the lowest one, stands above the bar).
     x0, y0 = limits[0][0] + 5, limits[1][0] + 5
     ax.plot([x0, x0 + 50], [y0, y0], color="0.5", linewidth=1)
-    ax.text(x0 + 25, y0 + 2, "50 cm", ha="center", va="bottom", fontsize=7, color="0.4")
+    ax.annotate(
+        "50 cm",
+        (x0 + 25, y0),
+        xytext=(0, -2),
+        textcoords="offset points",
+        ha="center",
+        va="top",
+        fontsize=7,
+        color="0.4",
+    )
 
 
 def plot_pose(
@@ -149,7 +192,8 @@ def plot_pose(
         axes: existing matplotlib axes, one per view; a new figure is made when omitted, with a
             legend for the left and right arm (for given axes, :func:`side_legend` adds one).
         title: figure title.
-        **line_style: passed to ``Axes.plot`` (e.g. ``alpha``, ``linewidth``).
+        **line_style: passed to ``Axes.plot`` (e.g. ``alpha``, ``linewidth``); a ``color`` draws
+            every bone in that colour (e.g. a reference pose in grey) instead of its side's.
     Returns:
         The matplotlib ``Figure``.
     """

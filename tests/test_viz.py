@@ -4,9 +4,10 @@ import subprocess
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from matplotlib.lines import Line2D
 
 from gesturelib import viz
-from gesturelib.skeleton import forward_kinematics, identity_rot6d
+from gesturelib.skeleton import KEYPOINTS, forward_kinematics, identity_rot6d
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +40,37 @@ def test_plot_pose_into_given_axes_leaves_the_legend_to_the_caller(motion):
     viz.side_legend(figure)
     assert _legend_labels(figure) == [["left arm", "right arm"]]
     plt.close(figure)
+
+
+def test_the_far_arm_is_drawn_thinner_on_top_of_the_near_one_in_the_side_view(motion):
+    figure = viz.plot_pose(motion[0])
+    front, side = figure.axes
+    left, right = KEYPOINTS.index("left_elbow"), KEYPOINTS.index("right_elbow")
+    # Bone i ends at keypoint i: line i of each view draws it.
+    assert front.lines[left].get_linewidth() == front.lines[right].get_linewidth() == 3
+    assert front.lines[left].get_zorder() == front.lines[right].get_zorder()
+    assert side.lines[left].get_linewidth() == pytest.approx(3 * viz.FAR_ARM_WIDTH)
+    assert viz.FAR_ARM_WIDTH < 1 and side.lines[right].get_linewidth() == 3
+    assert side.lines[left].get_zorder() > side.lines[right].get_zorder()
+    plt.close(figure)
+
+
+def test_one_colour_for_every_bone_and_extra_legend_entries(motion):
+    figure, ax = plt.subplots()
+    viz.plot_pose(motion[0], views=("front",), axes=[ax], color="0.7")
+    assert {line.get_color() for line in ax.lines} == {"0.7"}
+    reference = Line2D([], [], color="0.7", label="T-pose")
+    viz.side_legend(figure, extra=[reference])
+    assert _legend_labels(figure) == [["left arm", "right arm", "T-pose"]]
+    plt.close(figure)
+
+
+def test_the_scale_bar_label_hangs_below_the_bar(motion):
+    figure = viz.animate(motion, stride=10)._fig
+    for ax in figure.axes:
+        label = next(text for text in ax.texts if text.get_text() == "50 cm")
+        bar = next(line for line in ax.lines if line.get_color() == "0.5")  # the bones have none
+        assert label.get_va() == "top" and label.xy[1] == bar.get_ydata()[0]
 
 
 def test_animate_draws_every_stride_th_frame(motion):
