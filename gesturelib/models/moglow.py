@@ -25,6 +25,13 @@ over the 54 pose numbers whose couplings hold LSTMs:
   is infinite, so the flow is trained on poses plus noise off the surface
   (:mod:`gesturelib.pose_surface`), which moves no limb.
 
+* **Residual** (``residual=True``): the flow models the change from the last pose,
+  ``x_t - x_{t-1}``, a shift by a known vector (log-determinant 0), so the likelihood is still
+  that of ``x_t``. Motion is smooth, so the next pose lies very close to the last one; modelled
+  directly, the flow must learn that sharp a conditional from the past poses in its control,
+  which takes long training, and until then its samples jitter from frame to frame. The shift uses
+  the true last pose, which data dropout never hides.
+
 Training is teacher-forced on excerpts (4 s by default) from a zero state; one ``loss`` call
 evaluates a whole excerpt in one pass. Generation (:mod:`gesturelib.sampling`) runs frame by frame
 through :meth:`MoGlow.step`, starting from the mean pose and feeding back its own output.
@@ -65,6 +72,8 @@ class MoGlowConfig(SpeechContext):
         dropout: probability of replacing each past pose by the mean pose while training.
         pose_noise: standard deviation of the noise added to the poses, normalised units.
         noise_moves_limbs: noise in all 54 directions (True), not only in those that move no limb.
+        residual: the flow models the change from the last pose, ``x_t - x_{t-1}`` (needs
+            ``past_poses >= 1``); see the module docstring.
     """
 
     past_poses: int = 5
@@ -75,6 +84,7 @@ class MoGlowConfig(SpeechContext):
     dropout: float = 0.4
     pose_noise: float = 0.05
     noise_moves_limbs: bool = False
+    residual: bool = True
 
     def __post_init__(self):
         super().__post_init__()
@@ -84,8 +94,10 @@ class MoGlowConfig(SpeechContext):
             counts=("past_poses", "control_size"),
             fractions=("dropout",),
             non_negative=("pose_noise",),
-            flags=("style", "noise_moves_limbs"),
+            flags=("style", "noise_moves_limbs", "residual"),
         )
+        if self.residual and self.past_poses < 1:
+            raise ValueError("residual=True models the change from the last pose: past_poses >= 1")
 
     @property
     def raw_control_size(self) -> int:
@@ -163,7 +175,7 @@ class MoGlow(nn.Module):
         (pose,) = batch_parts(batch, {"pose": (POSE_DIM,)}, "MoGlow.loss")
         # Fixed noise in evaluation, so that the validation loss is the same every time.
         generator = None if self.training else torch.Generator(pose.device).manual_seed(0)
-        noisy = pose + self.noise(pose, generator)
+        noisy = pose + self.noise(pose, generator) - self._origin(batch)
         log_prob, _ = self.flow.log_prob(noisy, self.control(batch, drop_past=self.training))
         nll = -log_prob.mean() / pose.shape[1]
         return {"loss": nll, "nll": nll.detach()}
@@ -192,4 +204,9 @@ class MoGlow(nn.Module):
             ``(pose (B, 54), state)``.
         """
         pose, _, state = self.flow.inverse(noise[:, None], self.control(frame), state)
-        return pose[:, 0], state
+        return (pose + self._origin(frame))[:, 0], state
+
+    def _origin(self, batch) -> torch.Tensor | float:
+        """What the flow's poses are measured from: the last pose ``(B, L, 54)`` (never dropped
+        out), or 0."""
+        return batch["past_pose"][:, :, -1] if self.config.residual else 0.0
