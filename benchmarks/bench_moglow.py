@@ -38,6 +38,7 @@ from gesturelib.data import make_datasets
 from gesturelib.evaluation import generate_for, headline_measures, reference_motions
 from gesturelib.features import mel_spectrogram
 from gesturelib.history import History
+from gesturelib.metrics import rank_correlation
 from gesturelib.pose_surface import project
 from gesturelib.recipes import RECIPES
 from gesturelib.sampling import generate
@@ -78,21 +79,6 @@ def summarise(scores: list[dict]) -> str:
         spread = statistics.stdev(values) if len(values) > 1 else 0.0
         parts.append(f"{name} {statistics.mean(values):7.3f} ± {spread:.3f}")
     return "   ".join(parts)
-
-
-def rank_correlation(a, b) -> float:
-    """Spearman's rank correlation of two 1D arrays (ties get their mean rank)."""
-
-    def ranks(x):
-        x = np.asarray(x, dtype=np.float64)
-        order = np.argsort(x, kind="stable")
-        rank = np.empty(len(x))
-        rank[order] = np.arange(len(x))
-        for value in np.unique(x):  # ties: their mean rank
-            rank[x == value] = rank[x == value].mean()
-        return rank
-
-    return float(np.corrcoef(ranks(a), ranks(b))[0, 1])
 
 
 def style_control(model, normaliser, conversations, samples: int, temperature: float):

@@ -72,16 +72,20 @@ def speaking_listening_ratio(positions, activity, fps: int = FPS) -> float:
 
 
 def stroke_lead(
-    audio: np.ndarray, sample_rate: int, activity: np.ndarray, positions: np.ndarray
+    audio: np.ndarray,
+    sample_rate: int,
+    activity: np.ndarray,
+    positions: np.ndarray,
+    max_lag_s: float = 0.6,
 ) -> float:
     """Seconds by which the wrists' speed leads the emphasis of the agent's speech (positive:
-    the gestures come first), by cross-correlation over lags of up to 0.6 s; NaN for wrists that
-    never move (a lead is then undefined)."""
+    the gestures come first), by cross-correlation over lags of up to ``max_lag_s``; NaN for
+    wrists that never move (a lead is then undefined)."""
     from data_synth import measure_stroke_lead  # the audio's emphasis, as the generator defines it
 
     if np.ptp(wrist_speeds(positions).sum(axis=1)) == 0:
         return float("nan")
-    return measure_stroke_lead(audio, sample_rate, activity, positions)
+    return measure_stroke_lead(audio, sample_rate, activity, positions, max_lag_s=max_lag_s)
 
 
 def reference_motions(

@@ -13,6 +13,8 @@ one, so most measures compare *distributions* (Kucherenko et al. 2021; Taylor et
   where the agent speaks and those where it listens (:func:`split_by_activity`).
 * **Timing**: :func:`lead_lag`, the lag that best aligns two series (e.g. wrist speed against
   audio emphasis), by normalised cross-correlation.
+* **Order**: :func:`rank_correlation` (Spearman's), e.g. of a requested style against the one
+  realised.
 * **Accuracy and features**: :func:`average_position_error` (APE) and :func:`frechet_distance`
   (the distance behind FID and FGD, Ye et al. 2022).
 
@@ -415,6 +417,31 @@ def _pearson(signal: np.ndarray, reference: np.ndarray, lag: int) -> float:
     a, b = a - a.mean(), b - b.mean()
     norm = np.sqrt(np.sum(a * a) * np.sum(b * b))
     return float(np.sum(a * b) / norm) if norm > 0 else 0.0
+
+
+def rank_correlation(a, b) -> float:
+    """Spearman's rank correlation of two series ``(n,)``: the Pearson correlation of their
+    ranks, tied values sharing their mean rank. 1 when ``b`` rises with ``a``, -1 when it falls.
+
+    Raises:
+        ValueError: for series of different lengths, fewer than 2 values, or a constant one.
+    """
+    a, b = _as_array(a, "a"), _as_array(b, "b")
+    if a.ndim != 1 or a.shape != b.shape or a.size < 2:
+        raise ValueError(
+            f"a and b must be series of the same length >= 2, got {a.shape}, {b.shape}"
+        )
+    ranks = []
+    for name, values in (("a", a), ("b", b)):
+        if np.ptp(values) == 0:
+            raise ValueError(f"{name} is constant: its rank correlation is undefined")
+        order = np.argsort(values, kind="stable")
+        rank = np.empty(len(values))
+        rank[order] = np.arange(len(values), dtype=np.float64)
+        for value in np.unique(values):
+            rank[values == value] = rank[values == value].mean()  # ties: their mean rank
+        ranks.append(rank)
+    return float(np.corrcoef(*ranks)[0, 1])
 
 
 # --------------------------------------------------------------------------- accuracy, features

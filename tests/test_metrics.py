@@ -366,3 +366,18 @@ def test_frechet_distance_with_singular_covariance():
 def test_bad_input_raises_a_clear_value_error(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_rank_correlation_sees_order_not_scale_and_shares_ranks_among_ties():
+    from gesturelib.metrics import rank_correlation
+
+    x = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    assert rank_correlation(x, np.exp(x)) == pytest.approx(1.0)
+    assert rank_correlation(x, -(x**3)) == pytest.approx(-1.0)
+    # ties share their mean rank: ranks (0.5, 0.5, 2) against (0, 1, 2)
+    expected = np.corrcoef([0.5, 0.5, 2.0], [0.0, 1.0, 2.0])[0, 1]
+    assert rank_correlation([1.0, 1.0, 2.0], [3.0, 4.0, 5.0]) == pytest.approx(expected)
+    with pytest.raises(ValueError, match="constant"):
+        rank_correlation([1.0, 1.0], [1.0, 2.0])
+    with pytest.raises(ValueError, match="same length"):
+        rank_correlation([1.0, 2.0], [1.0, 2.0, 3.0])
