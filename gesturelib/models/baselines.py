@@ -68,8 +68,9 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
+from gesturelib.configs import SpeechContext, check_fields
 from gesturelib.conventions import N_MELS, NUM_ACTIVITIES
-from gesturelib.models.common import batch_parts, check_config_fields, eval_mode, mlp
+from gesturelib.models.common import batch_parts, eval_mode, mlp
 from gesturelib.skeleton import POSE_DIM
 
 # ---------------------------------------------------------------------------------------------
@@ -105,14 +106,14 @@ class SpeechWindowNet(nn.Module):
 
 
 @dataclass(frozen=True)
-class SpeechEncoderConfig:
+class SpeechEncoderConfig(SpeechContext):
     """What the speech network reads and how big it is (shared by Aud2Pose and Aud2Repr2Pose).
 
     Attributes:
         n_mels: log-mel bands per frame (27).
         n_activities: speech-activity classes (4).
-        speech_past, speech_future: the window around each frame, as in
-            :class:`gesturelib.data.WindowConfig` (5 and 25).
+        speech_past, speech_future: the window around each frame
+            (:class:`~gesturelib.configs.SpeechContext`).
         use_activity: also read the activity one-hot of each window frame.
         hidden_size: width of the FC and GRU layers (the paper: 256).
         dropout: dropout probability (the paper: 0.1).
@@ -120,29 +121,18 @@ class SpeechEncoderConfig:
 
     n_mels: int = N_MELS
     n_activities: int = NUM_ACTIVITIES
-    speech_past: int = 5
-    speech_future: int = 25
     use_activity: bool = True
     hidden_size: int = 64
     dropout: float = 0.1
 
     def __post_init__(self):
-        check_config_fields(
+        super().__post_init__()
+        check_fields(
             self,
             positive=("n_mels", "n_activities", "hidden_size"),
-            counts=("speech_past", "speech_future"),
             fractions=("dropout",),
+            flags=("use_activity",),
         )
-        if not isinstance(self.use_activity, bool):
-            raise ValueError(
-                f"{type(self).__name__}.use_activity must be True or False, got "
-                f"{self.use_activity!r}"
-            )
-
-    @property
-    def speech_window(self) -> int:
-        """Frames in each window: past + the frame itself + future."""
-        return self.speech_past + 1 + self.speech_future
 
     @property
     def frame_features(self) -> int:
@@ -184,7 +174,7 @@ class Aud2PoseConfig(SpeechEncoderConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        check_config_fields(self, positive=("pose_dim",), non_negative=("velocity_weight",))
+        check_fields(self, positive=("pose_dim",), non_negative=("velocity_weight",))
 
     @classmethod
     def quick(cls, **changes) -> Aud2PoseConfig:
@@ -279,7 +269,7 @@ class MotionDAEConfig:
     noise_std: float = 0.05
 
     def __post_init__(self):
-        check_config_fields(
+        check_fields(
             self,
             positive=("pose_dim", "representation_dim"),
             sizes=("hidden_sizes",),

@@ -1,9 +1,8 @@
-"""Pieces shared by the model files: checking batches and configs, small layers, eval mode."""
+"""Pieces shared by the model files: checking batches, small layers, eval mode."""
 
 from __future__ import annotations
 
 import contextlib
-import math
 from collections.abc import Mapping
 
 import torch
@@ -60,54 +59,6 @@ def batch_parts(
             )
         parts.append(part)
     return parts
-
-
-def check_config_fields(
-    config,
-    *,
-    positive: tuple = (),
-    counts: tuple = (),
-    sizes: tuple = (),
-    fractions: tuple = (),
-    non_negative: tuple = (),
-) -> None:
-    """Validate a config's fields; the error names the class and the field.
-
-    Args:
-        positive: fields that must be integers >= 1.
-        counts: fields that must be integers >= 0.
-        sizes: fields that must be tuples of integers >= 1 (layer sizes; may be empty).
-        fractions: fields that must be numbers in [0, 1) (dropout probabilities).
-        non_negative: fields that must be finite numbers >= 0.
-    Raises:
-        ValueError: for the first bad field.
-    """
-    kind = type(config).__name__
-
-    def is_int(value, minimum):
-        return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
-
-    for names, minimum in ((positive, 1), (counts, 0)):
-        for name in names:
-            if not is_int(getattr(config, name), minimum):
-                raise ValueError(
-                    f"{kind}.{name} must be an integer >= {minimum}, got {getattr(config, name)!r}"
-                )
-    for name in sizes:
-        value = getattr(config, name)
-        if not (isinstance(value, tuple) and all(is_int(v, 1) for v in value)):
-            raise ValueError(f"{kind}.{name} must be a tuple of integers >= 1, got {value!r}")
-    for name in (*fractions, *non_negative):
-        value = getattr(config, name)
-        upper = 1.0 if name in fractions else math.inf
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-            or not 0 <= value < upper
-        ):
-            what = "a number in [0, 1)" if name in fractions else "a finite number >= 0"
-            raise ValueError(f"{kind}.{name} must be {what}, got {value!r}")
 
 
 def mlp(sizes: list[int]) -> nn.Sequential:

@@ -96,14 +96,9 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from gesturelib.configs import SpeechContext, check_fields
 from gesturelib.conventions import N_MELS, NUM_ACTIVITIES
-from gesturelib.models.common import (
-    batch_parts,
-    check_config_fields,
-    eval_mode,
-    first_parameter,
-    mlp,
-)
+from gesturelib.models.common import batch_parts, eval_mode, first_parameter, mlp
 from gesturelib.skeleton import POSE_DIM
 
 # ---------------------------------------------------------------------------------------------
@@ -193,7 +188,7 @@ class PoseAutoencoderConfig:
     latent_dim: int = 2
 
     def __post_init__(self):
-        check_config_fields(self, positive=("pose_dim", "latent_dim"), sizes=("hidden_sizes",))
+        check_fields(self, positive=("pose_dim", "latent_dim"), sizes=("hidden_sizes",))
 
     @classmethod
     def quick(cls, **changes) -> PoseAutoencoderConfig:
@@ -253,7 +248,7 @@ class PoseVAEConfig(PoseAutoencoderConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        check_config_fields(self, non_negative=("beta",))
+        check_fields(self, non_negative=("beta",))
 
 
 class PoseVAE(nn.Module):
@@ -322,15 +317,15 @@ class PoseVAE(nn.Module):
 
 
 @dataclass(frozen=True)
-class CVAEConfig:
+class CVAEConfig(SpeechContext):
     """Sizes of the CVAE baseline; the paper's values are in the module docstring.
 
     Attributes:
         pose_dim: numbers per pose (54).
         n_mels: log-mel bands per frame (27).
         n_activities: speech-activity classes (4).
-        speech_past, speech_future: the control window around each frame, as in
-            :class:`gesturelib.data.WindowConfig` (5 and 25).
+        speech_past, speech_future: the control window around each frame
+            (:class:`~gesturelib.configs.SpeechContext`).
         control_size: the window of each frame is compressed to this many numbers.
         hidden_size: units per LSTM layer (the paper: 200).
         num_layers: LSTM layers in the encoder and in the decoder (the paper: 5).
@@ -342,8 +337,6 @@ class CVAEConfig:
     pose_dim: int = POSE_DIM
     n_mels: int = N_MELS
     n_activities: int = NUM_ACTIVITIES
-    speech_past: int = 5
-    speech_future: int = 25
     control_size: int = 64
     hidden_size: int = 64
     num_layers: int = 2
@@ -352,7 +345,8 @@ class CVAEConfig:
     beta: float = 1.0
 
     def __post_init__(self):
-        check_config_fields(
+        super().__post_init__()
+        check_fields(
             self,
             positive=(
                 "pose_dim",
@@ -363,15 +357,9 @@ class CVAEConfig:
                 "num_layers",
                 "latent_dim",
             ),
-            counts=("speech_past", "speech_future"),
             fractions=("dropout",),
             non_negative=("beta",),
         )
-
-    @property
-    def speech_window(self) -> int:
-        """Frames in each control window: past + the frame itself + future."""
-        return self.speech_past + 1 + self.speech_future
 
     @classmethod
     def quick(cls, **changes) -> CVAEConfig:
