@@ -5,26 +5,17 @@ over the 54 pose numbers whose couplings hold LSTMs:
 
     x_t  --ActNorm--linear--coupling(LSTM)--> ... (K steps) -->  z_t ~ N(0, I)
 
-* **The control** ``c_t`` of frame ``t``: the previous ``tau = 5`` poses, the speech window
-  (5 past, the current and 25 future log-mel frames: 1 s of look-ahead, because gestures lead the
-  speech they go with), the same window of the who-is-talking one-hot, and optionally the style
-  (:mod:`gesturelib.style`). Every coupling reads it, next to the untouched half of the pose.
+* **The control** ``c_t`` of frame ``t`` (:mod:`gesturelib.models.control`): the previous
+  ``tau = 5`` poses (with data dropout while training), the speech window with 1 s of
+  look-ahead, the same window of who is talking, and optionally the style, encoded by one small
+  network into ``control_size`` numbers that every coupling reads next to the untouched half of
+  the pose.
 * **Memory**: each coupling's LSTM runs along the frames, so the flow at frame ``t`` depends on
   everything before it, not only on ``tau`` poses. The likelihood of a sequence is exact:
   ``log p(x_{1:T} | c) = sum_t log p(x_t | x_{<t}, c_t)``.
-* **A shared control encoder**: the raw control is about 1.2k numbers a frame. Given to each of
-  the ``K`` LSTMs it would dominate the cost, so one small network (as Ye et al.'s global
-  encoder) turns it into ``control_size`` numbers that all couplings read
-  (``control_size=0`` feeds the raw control to every coupling, as the reference code does;
-  ``benchmarks/bench_moglow.py`` measures the two).
-* **Data dropout** (training only): each past pose in the control is replaced by the mean pose
-  (zero, in normalised units) with probability ``dropout`` (0.4, the paper's), independently.
-  Without it the model can predict the next pose from the last ones alone and ignore the speech.
-  Validation never drops (the reference code validates with dropout on: a bug we avoid).
 * **Pose noise**: poses lie on an 18-dimensional surface inside their 54 numbers, where a density
   is infinite, so the flow is trained on poses plus noise off the surface
   (:mod:`gesturelib.pose_surface`), which moves no limb.
-
 * **Residual** (``residual=True``): the flow models the change from the last pose,
   ``x_t - x_{t-1}``, a shift by a known vector (log-determinant 0), so the likelihood is still
   that of ``x_t``. Motion is smooth, so the next pose lies very close to the last one; modelled
@@ -48,40 +39,31 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from gesturelib.configs import SpeechContext, check_fields
-from gesturelib.conventions import N_MELS, NUM_ACTIVITIES
+from gesturelib.configs import check_fields
 from gesturelib.flows import RecurrentFlow, recurrent_glow
 from gesturelib.models.common import batch_parts
+from gesturelib.models.control import ControlConfig, ControlEncoder
 from gesturelib.pose_surface import SurfaceNoise
 from gesturelib.skeleton import POSE_DIM
-from gesturelib.style import STYLE_FEATURES
 
 
 @dataclass(frozen=True)
-class MoGlowConfig(SpeechContext):
+class MoGlowConfig(ControlConfig):
     """MoGlow's sizes (the paper: K = 16 steps, LSTMs of 800 units; here sized for a CPU).
 
     Attributes:
-        speech_past, speech_future: the speech and activity window (5 and 25 frames).
-        past_poses: tau, the previous poses in the control.
-        style: also condition on the style measured from the motion (:mod:`gesturelib.style`).
+        speech_past, speech_future, past_poses, style, control_size, dropout: the control
+            (:class:`~gesturelib.models.control.ControlConfig`).
         steps: Glow steps ``K``.
         hidden: units of each coupling's LSTM, and of the control encoder's hidden layer.
-        control_size: numbers the shared control encoder outputs; 0 feeds the raw control to
-            every coupling.
-        dropout: probability of replacing each past pose by the mean pose while training.
         pose_noise: standard deviation of the noise added to the poses, normalised units.
         noise_moves_limbs: noise in all 54 directions (True), not only in those that move no limb.
         residual: the flow models the change from the last pose, ``x_t - x_{t-1}`` (needs
             ``past_poses >= 1``); see the module docstring.
     """
 
-    past_poses: int = 5
-    style: bool = False
     steps: int = 8
     hidden: int = 128
-    control_size: int = 64
-    dropout: float = 0.4
     pose_noise: float = 0.05
     noise_moves_limbs: bool = False
     residual: bool = True
@@ -91,19 +73,11 @@ class MoGlowConfig(SpeechContext):
         check_fields(
             self,
             positive=("steps", "hidden"),
-            counts=("past_poses", "control_size"),
-            fractions=("dropout",),
             non_negative=("pose_noise",),
-            flags=("style", "noise_moves_limbs", "residual"),
+            flags=("noise_moves_limbs", "residual"),
         )
         if self.residual and self.past_poses < 1:
             raise ValueError("residual=True models the change from the last pose: past_poses >= 1")
-
-    @property
-    def raw_control_size(self) -> int:
-        """Numbers in the control of one frame before encoding."""
-        window = self.speech_window * (N_MELS + NUM_ACTIVITIES)
-        return self.past_poses * POSE_DIM + window + (len(STYLE_FEATURES) if self.style else 0)
 
     @classmethod
     def quick(cls, **changes) -> MoGlowConfig:
@@ -131,44 +105,13 @@ class MoGlow(nn.Module):
     def __init__(self, config: MoGlowConfig, normaliser=None):
         super().__init__()
         self.config = config
-        raw = config.raw_control_size
-        if config.control_size:
-            self.encoder = nn.Sequential(
-                nn.Linear(raw, config.hidden),
-                nn.ReLU(),
-                nn.Linear(config.hidden, config.control_size),
-            )
-        else:
-            self.encoder = nn.Identity()
+        self.control = ControlEncoder(config, config.hidden)
         self.flow: RecurrentFlow = recurrent_glow(
-            POSE_DIM, config.steps, config.hidden, config.control_size or raw, cell="lstm"
+            POSE_DIM, config.steps, config.hidden, config.encoded_size, cell="lstm"
         )
         self.noise = SurfaceNoise(config.pose_noise, across_only=not config.noise_moves_limbs)
         if normaliser is not None:
             self.noise.set_statistics(normaliser)
-
-    def control(self, batch: dict[str, torch.Tensor], drop_past: bool = False) -> torch.Tensor:
-        """The encoded control of every frame, ``(B, L, control_size)`` (raw: ``(B, L, 1231)``).
-
-        Args:
-            batch: ``past_pose``, ``speech``, ``activity`` (and ``style``), as for :meth:`loss`.
-            drop_past: apply data dropout to the past poses (training only).
-        """
-        config = self.config
-        expected = {
-            "past_pose": (config.past_poses, POSE_DIM),
-            "speech": (config.speech_window, N_MELS),
-            "activity": (config.speech_window, NUM_ACTIVITIES),
-        }
-        if config.style:
-            expected["style"] = (len(STYLE_FEATURES),)
-        parts = batch_parts(batch, expected, "MoGlow")
-        past = parts[0]
-        if drop_past and config.dropout > 0:
-            kept = torch.rand(past.shape[:3], device=past.device) >= config.dropout
-            past = past * kept[..., None]  # a dropped pose becomes the mean pose, zero
-        flat = [part.flatten(2) for part in (past, *parts[1:])]
-        return self.encoder(torch.cat(flat, dim=-1))
 
     def loss(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         """Negative log-likelihood per frame of the noisy poses of ``batch`` (teacher forcing)."""

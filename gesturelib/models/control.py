@@ -1,0 +1,108 @@
+"""The control signal of the autoregressive flows (MoGlow, the Flow-VAE), and its shared encoder.
+
+The control ``c_t`` of frame ``t`` is what the next-frame flow is conditioned on:
+
+* the previous ``tau`` poses (``past_pose``), with **data dropout** while training: each past pose
+  is replaced by the mean pose (zero, in normalised units) with probability ``dropout``,
+  independently, so that the model cannot simply continue its past and ignore the speech
+  (Alexanderson et al. 2020); validation and generation never drop;
+* the speech window (5 past, the current and 25 future log-mel frames: 1 s of look-ahead,
+  because gestures lead the speech they go with) and the same window of who is talking;
+* optionally MoGlow's style inputs (:mod:`gesturelib.style`).
+
+That is about 1.2k numbers a frame. Read by the recurrent network of each of the ``K`` couplings,
+it would dominate the cost, so one small network (as Ye et al.'s global encoder) turns it into
+``control_size`` numbers that all couplings read; ``control_size=0`` passes the raw control on,
+as the reference MoGlow code does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from gesturelib.configs import SpeechContext, check_fields
+from gesturelib.conventions import N_MELS, NUM_ACTIVITIES
+from gesturelib.models.common import batch_parts
+from gesturelib.skeleton import POSE_DIM
+from gesturelib.style import STYLE_FEATURES
+
+
+@dataclass(frozen=True)
+class ControlConfig(SpeechContext):
+    """What the control of a frame holds, and how it is encoded.
+
+    Attributes:
+        speech_past, speech_future: the speech and activity window (5 and 25 frames).
+        past_poses: tau, the previous poses in the control.
+        style: also condition on the style measured from the motion (:mod:`gesturelib.style`).
+        control_size: numbers the shared control encoder outputs; 0 passes the raw control on.
+        dropout: probability of replacing each past pose by the mean pose while training.
+    """
+
+    past_poses: int = 5
+    style: bool = False
+    control_size: int = 64
+    dropout: float = 0.4
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_fields(
+            self,
+            counts=("past_poses", "control_size"),
+            fractions=("dropout",),
+            flags=("style",),
+        )
+
+    @property
+    def raw_control_size(self) -> int:
+        """Numbers in the control of one frame before encoding."""
+        window = self.speech_window * (N_MELS + NUM_ACTIVITIES)
+        return self.past_poses * POSE_DIM + window + (len(STYLE_FEATURES) if self.style else 0)
+
+    @property
+    def encoded_size(self) -> int:
+        """Numbers in the control the couplings read: ``control_size``, or the raw size."""
+        return self.control_size or self.raw_control_size
+
+
+class ControlEncoder(nn.Module):
+    """The control of every frame of a batch: ``(B, L, encoded_size)``.
+
+    Args:
+        config: what the control holds (any :class:`ControlConfig`).
+        hidden: width of the encoder's hidden layer.
+    """
+
+    def __init__(self, config: ControlConfig, hidden: int):
+        super().__init__()
+        self.config = config
+        if config.control_size:
+            self.encoder = nn.Sequential(
+                nn.Linear(config.raw_control_size, hidden),
+                nn.ReLU(),
+                nn.Linear(hidden, config.control_size),
+            )
+        else:
+            self.encoder = nn.Identity()
+
+    def forward(self, batch: dict[str, torch.Tensor], drop_past: bool = False) -> torch.Tensor:
+        """Encode ``past_pose (B, L, tau, 54)``, ``speech (B, L, W, 27)``, ``activity (B, L, W, 4)``
+        (and ``style (B, L, 4)``) into ``(B, L, encoded_size)``; ``drop_past`` applies data
+        dropout (training only)."""
+        config = self.config
+        expected = {
+            "past_pose": (config.past_poses, POSE_DIM),
+            "speech": (config.speech_window, N_MELS),
+            "activity": (config.speech_window, NUM_ACTIVITIES),
+        }
+        if config.style:
+            expected["style"] = (len(STYLE_FEATURES),)
+        past, *rest = batch_parts(batch, expected, type(self).__name__)
+        if drop_past and config.dropout > 0:
+            kept = torch.rand(past.shape[:3], device=past.device) >= config.dropout
+            past = past * kept[..., None]  # a dropped pose becomes the mean pose, zero
+        flat = [part.flatten(2) for part in (past, *rest)]
+        return self.encoder(torch.cat(flat, dim=-1))
