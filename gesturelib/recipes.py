@@ -7,6 +7,9 @@ that train the same model, so that a model is the same wherever it is trained:
 name                model                   trained on
 ==================  ======================  ==========================================================
 ``moglow``          :class:`MoGlow`         4 s excerpts (teacher forcing), built with the normaliser
+``flowvae``         :class:`FlowVAE`        4 s excerpts, as MoGlow
+``flowvae_elbo``    the variational         4 s excerpts, built with the normaliser
+                    :class:`FlowVAE`
 ``cvae``            :class:`CVAE`           2 s excerpts
 ``aud2pose``        :class:`Aud2Pose`       single frames with their speech windows
 ``motion_dae``      the denoising            excerpts of 1 s (its frames independent); stage 1 of
@@ -32,10 +35,14 @@ from gesturelib.models import (
     Aud2Repr2Pose,
     Aud2Repr2PoseConfig,
     CVAEConfig,
+    FlowVAE,
+    FlowVAEConfig,
     MoGlow,
     MoGlowConfig,
     MotionDAEConfig,
     MotionDenoisingAutoencoder,
+    VariationalFlowVAE,
+    VariationalFlowVAEConfig,
 )
 from gesturelib.train import TrainConfig
 
@@ -81,6 +88,10 @@ class Recipe:
         return self.build(config, normaliser, stage_one_model)
 
 
+_EXCERPTS = WindowConfig(sequence_length=100, stride=50)
+_QUICK_EXCERPTS = WindowConfig(sequence_length=50, stride=25)
+_FLOW_TRAINING = TrainConfig(epochs=30, batch_size=16, warmup_steps=500, patience=8)
+_QUICK_FLOW_TRAINING = TrainConfig.quick(epochs=3, batch_size=8, warmup_steps=50)
 _REGRESSOR_TRAINING = TrainConfig(epochs=10, batch_size=64, warmup_steps=200, patience=4)
 _QUICK_REGRESSOR_TRAINING = TrainConfig.quick(epochs=4, batch_size=32, warmup_steps=100)
 _FRAMES = WindowConfig(sequence_length=1, stride=8)
@@ -89,13 +100,32 @@ _QUICK_FRAMES = WindowConfig(sequence_length=1, stride=6)
 RECIPES: dict[str, Recipe] = {
     "moglow": Recipe(
         MoGlow,
-        WindowConfig(sequence_length=100, stride=50),
-        WindowConfig(sequence_length=50, stride=25),
+        _EXCERPTS,
+        _QUICK_EXCERPTS,
         MoGlowConfig(),
         MoGlowConfig.quick(),
-        TrainConfig(epochs=30, batch_size=16, warmup_steps=500, patience=8),
-        TrainConfig.quick(epochs=3, batch_size=8, warmup_steps=50),
+        _FLOW_TRAINING,
+        _QUICK_FLOW_TRAINING,
         build=lambda config, normaliser, _: MoGlow(config, normaliser),
+    ),
+    "flowvae": Recipe(
+        FlowVAE,
+        _EXCERPTS,
+        _QUICK_EXCERPTS,
+        FlowVAEConfig(),
+        FlowVAEConfig.quick(),
+        _FLOW_TRAINING,
+        _QUICK_FLOW_TRAINING,
+    ),
+    "flowvae_elbo": Recipe(
+        VariationalFlowVAE,
+        _EXCERPTS,
+        _QUICK_EXCERPTS,
+        VariationalFlowVAEConfig(),
+        VariationalFlowVAEConfig.quick(),
+        _FLOW_TRAINING,
+        _QUICK_FLOW_TRAINING,
+        build=lambda config, normaliser, _: VariationalFlowVAE(config, normaliser),
     ),
     "cvae": Recipe(
         CVAE,

@@ -11,6 +11,9 @@ rebuilds it (``Model.config_class``). Configs have working defaults for the cour
   :class:`Aud2Pose` and :class:`Aud2Repr2Pose` (trained after its
   :class:`MotionDenoisingAutoencoder`).
 * :mod:`~gesturelib.models.moglow`: :class:`MoGlow`, the autoregressive speech-conditioned flow.
+* :mod:`~gesturelib.models.flowvae`: :class:`FlowVAE`, the conditional Flow-VAE of Taylor et al.,
+  and :class:`VariationalFlowVAE`, its variant whose loss is an ELBO.
+* :mod:`~gesturelib.models.control`: the control those flows are conditioned on.
 """
 
 from gesturelib.models.baselines import (
@@ -21,6 +24,12 @@ from gesturelib.models.baselines import (
     MotionDAEConfig,
     MotionDenoisingAutoencoder,
     SpeechWindowNet,
+)
+from gesturelib.models.flowvae import (
+    FlowVAE,
+    FlowVAEConfig,
+    VariationalFlowVAE,
+    VariationalFlowVAEConfig,
 )
 from gesturelib.models.moglow import MoGlow, MoGlowConfig
 from gesturelib.models.vae import (
@@ -41,6 +50,8 @@ __all__ = [
     "Aud2Repr2Pose",
     "Aud2Repr2PoseConfig",
     "CVAEConfig",
+    "FlowVAE",
+    "FlowVAEConfig",
     "MoGlow",
     "MoGlowConfig",
     "MotionDAEConfig",
@@ -50,6 +61,8 @@ __all__ = [
     "PoseVAE",
     "PoseVAEConfig",
     "SpeechWindowNet",
+    "VariationalFlowVAE",
+    "VariationalFlowVAEConfig",
     "gaussian_kl",
     "reparameterise",
 ]

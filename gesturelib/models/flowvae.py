@@ -1,0 +1,312 @@
+"""The conditional Flow-VAE (Taylor et al. 2021), and a variational variant whose loss is an ELBO.
+
+An autoencoder compresses each pose to a small latent, ``x_t -> h_t -> x_t'``, frame by frame and
+without any conditioning; a MoGlow-style flow (LSTM couplings, :mod:`gesturelib.flows.recurrent`)
+models the latents of a motion given the control of each frame (past poses, speech and activity
+windows: :mod:`gesturelib.models.control`):
+
+    training:    x_t --encoder--> h_t --flow(c_t)--> z_t ~ N(0, I)
+    generation:  z_t ~ N(0, I) --flow^-1(c_t)--> h'_t --decoder--> x'_t,  fed back as the past
+
+Every part is trained together. The flow works on ``latent_dim`` numbers instead of 54, which is
+why the paper's model is smaller and faster to train than MoGlow.
+
+:class:`FlowVAE` is the paper's model. Its loss (eq. 4) is
+
+    alpha * NLL(h) + MSE(x, d(h)) + MSE(x, d(h')),     h = e(x),  h' = f^-1(z'; c), z' ~ N(0, I)
+
+where the last term, the paper's novelty, decodes a latent *drawn from the flow* for the same
+control and asks it to be the real pose. ``sample_weight`` weighs it (0: the ablation). The
+encoder is deterministic, so NLL(h) is not a likelihood of ``x``: the encoder can lower it
+without end by shrinking ``h``, and the decoder can undo the shrinking. The remedy here is
+``latent_noise``: the flow and the decoder see ``h + sigma * eps`` with a fixed ``sigma``, so a
+shrunken latent drowns in the noise and can no longer be decoded. That makes the encoder a
+Gaussian with fixed variance, and the loss a weighted, beta-VAE-like objective.
+
+:class:`VariationalFlowVAE` makes it a true ELBO on ``log p(x | c)``: a Gaussian encoder
+``q(h | x)``, the flow as the conditional prior ``p(h | c)``, and a Gaussian decoder with a learned
+standard deviation per pose number,
+
+    log p(x | c) >= E_q[log p(x | h)] - E_q[log q(h | x) - log p_flow(h | c)],
+
+estimated with one draw of ``h``. Like MoGlow it models poses with a little noise off the pose
+surface (:mod:`gesturelib.pose_surface`), so its bound and MoGlow's likelihood are in the same
+nats. Generation decodes the decoder's mean.
+
+Both have ``residual`` (as MoGlow): the flow models the change of the latent from the encoding
+of the last pose, ``h_t - e(x_{t-1})``, a shift by a known vector (log-determinant 0).
+
+Logged scalars (``loss(batch)``), all per frame: :class:`FlowVAE`: ``loss``, ``nll`` (of the
+latent, nats), ``mse`` (of ``d(h)``, per number), ``sample_mse`` (of ``d(h')``; always on the
+validation data, in training only if it is in the loss) and ``latent_std`` (the spread of ``h``);
+:class:`VariationalFlowVAE`: ``loss`` (= -ELBO, nats), ``reconstruction`` (-E log p(x | h)),
+``kl`` and ``latent_std``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from gesturelib.configs import check_fields
+from gesturelib.flows import RecurrentFlow, recurrent_glow
+from gesturelib.models.common import batch_parts, mlp
+from gesturelib.models.control import ControlConfig, ControlEncoder
+from gesturelib.pose_surface import SurfaceNoise
+from gesturelib.runtime import standard_normal
+from gesturelib.skeleton import POSE_DIM
+
+LOG_2PI = float(torch.log(torch.tensor(2 * torch.pi)))
+
+
+@dataclass(frozen=True)
+class LatentFlowConfig(ControlConfig):
+    """What both Flow-VAEs share: the control, the autoencoder and the flow over its latent.
+
+    Attributes:
+        speech_past, speech_future, past_poses, style, control_size, dropout: the control
+            (:class:`~gesturelib.models.control.ControlConfig`).
+        latent_dim: numbers per latent ``h_t`` (the paper: 35).
+        autoencoder_hidden: units of the encoder's and the decoder's hidden layer (the paper: 105).
+        steps: Glow steps ``K`` of the flow (the paper: 8).
+        hidden: units of each coupling's LSTM and of the control encoder (the paper: 400).
+        residual: the flow models ``h_t - e(x_{t-1})`` (needs ``past_poses >= 1``).
+    """
+
+    latent_dim: int = 16
+    autoencoder_hidden: int = 105
+    steps: int = 4
+    hidden: int = 64
+    residual: bool = True
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_fields(
+            self,
+            positive=("latent_dim", "autoencoder_hidden", "steps", "hidden"),
+            flags=("residual",),
+        )
+        if not 2 <= self.latent_dim < POSE_DIM:
+            raise ValueError(
+                f"{type(self).__name__}.latent_dim must be between 2 and {POSE_DIM - 1} (a "
+                f"latent smaller than the pose, and a flow needs 2 numbers), got {self.latent_dim}"
+            )
+        if self.residual and self.past_poses < 1:
+            raise ValueError("residual=True needs the last pose in the control: past_poses >= 1")
+
+
+@dataclass(frozen=True)
+class FlowVAEConfig(LatentFlowConfig):
+    """The paper's Flow-VAE: :class:`LatentFlowConfig` and the weights of its loss.
+
+    Attributes:
+        alpha: weight of the latent's NLL (the paper: 5e-4, for its scale of losses).
+        sample_weight: weight of ``MSE(x, d(h'))``, the term with a latent drawn from the flow
+            (the paper: 1; 0 leaves it out).
+        latent_noise: standard deviation of the noise added to ``h`` (0: none, and the encoder
+            can shrink its latent without end; see the module docstring).
+    """
+
+    alpha: float = 0.01
+    sample_weight: float = 1.0
+    latent_noise: float = 0.1
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_fields(self, non_negative=("alpha", "sample_weight", "latent_noise"))
+
+    @classmethod
+    def quick(cls, **changes) -> FlowVAEConfig:
+        """A small Flow-VAE for tests and quick mode; ``changes`` override any field."""
+        small = cls(latent_dim=8, autoencoder_hidden=32, steps=2, hidden=32, control_size=16)
+        return dataclasses.replace(small, **changes)
+
+
+@dataclass(frozen=True)
+class VariationalFlowVAEConfig(LatentFlowConfig):
+    """The variational Flow-VAE: :class:`LatentFlowConfig` and MoGlow's pose noise.
+
+    Attributes:
+        pose_noise: standard deviation of the noise off the pose surface, normalised units (as
+            :class:`~gesturelib.models.MoGlowConfig`, so that the two are measured in the same
+            nats).
+    """
+
+    pose_noise: float = 0.05
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_fields(self, non_negative=("pose_noise",))
+
+    @classmethod
+    def quick(cls, **changes) -> VariationalFlowVAEConfig:
+        """A small variational Flow-VAE for tests and quick mode; ``changes`` override any
+        field."""
+        small = cls(latent_dim=8, autoencoder_hidden=32, steps=2, hidden=32, control_size=16)
+        return dataclasses.replace(small, **changes)
+
+
+class _LatentFlowModel(nn.Module):
+    """The control encoder, the flow over the latent, the decoder, and generation.
+
+    Subclasses add the encoder, :meth:`encode` (the latent, or its mean, of poses ``(..., 54)``)
+    and ``loss``.
+    """
+
+    #: The temperature generation uses unless told otherwise.
+    default_temperature = 1.0
+
+    def __init__(self, config: LatentFlowConfig):
+        super().__init__()
+        self.config = config
+        self.control = ControlEncoder(config, config.hidden)
+        self.flow: RecurrentFlow = recurrent_glow(
+            config.latent_dim, config.steps, config.hidden, config.encoded_size, cell="lstm"
+        )
+        self.decoder = mlp([config.latent_dim, config.autoencoder_hidden, POSE_DIM])
+
+    def encode(self, pose: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def decode(self, latent: torch.Tensor) -> torch.Tensor:
+        """Poses ``(..., 54)`` (normalised) from latents ``(..., latent_dim)``."""
+        return self.decoder(latent)
+
+    @property
+    def noise_dim(self) -> int:
+        """Numbers of base noise per generated frame: the latent's."""
+        return self.config.latent_dim
+
+    def generating(self):
+        """``with model.generating():`` fixes the flow's weights for frame-by-frame generation."""
+        return self.flow.fixed_weights()
+
+    @torch.no_grad()
+    def step(self, frame: dict[str, torch.Tensor], state, noise: torch.Tensor):
+        """One frame of generation (:mod:`gesturelib.sampling`): ``z_t -> h'_t -> x'_t``.
+
+        Args:
+            frame: the control of one frame, as a batch with ``L = 1`` (``past_pose
+                (B, 1, tau, 54)``, the model's own recent output; ``speech``, ``activity``).
+            state: the flow's state after the previous frame (None at the start).
+            noise: ``z_t`` ``(B, latent_dim)``, already scaled by the temperature.
+        Returns:
+            ``(pose (B, 54), state)``, the pose normalised.
+        """
+        latent, _, state = self.flow.inverse(noise[:, None], self.control(frame), state)
+        return self.decode(latent + self._origin(frame))[:, 0], state
+
+    def _origin(self, batch) -> torch.Tensor | float:
+        """What the flow's latents are measured from: the encoding of the last pose
+        ``(B, L, latent_dim)``, or 0."""
+        return self.encode(batch["past_pose"][:, :, -1]) if self.config.residual else 0.0
+
+    def _pose_and_control(self, batch):
+        """``pose (B, L, 54)``, the encoded control, and a generator for evaluation's draws
+        (fixed, so that the validation loss is the same every time; None in training)."""
+        (pose,) = batch_parts(batch, {"pose": (POSE_DIM,)}, f"{type(self).__name__}.loss")
+        control = self.control(batch, drop_past=self.training)
+        generator = None if self.training else torch.Generator(pose.device).manual_seed(0)
+        return pose, control, generator
+
+
+class FlowVAE(_LatentFlowModel):
+    """The paper's Flow-VAE: a deterministic autoencoder and a flow over its latent.
+
+    ``loss(batch)`` needs the items of :class:`gesturelib.data.WindowDataset` with
+    ``sequence_length = L``: ``pose (B, L, 54)``, ``past_pose (B, L, tau, 54)``, ``speech
+    (B, L, W, 27)``, ``activity (B, L, W, 4)`` (and ``style``). See the module docstring.
+    """
+
+    config_class = FlowVAEConfig
+
+    def __init__(self, config: FlowVAEConfig, normaliser=None):
+        super().__init__(config)
+        self.encoder = mlp([POSE_DIM, config.autoencoder_hidden, config.latent_dim])
+
+    def encode(self, pose: torch.Tensor) -> torch.Tensor:
+        """The latent ``h = e(x)`` ``(..., latent_dim)`` of poses ``(..., 54)`` (normalised)."""
+        return self.encoder(pose)
+
+    def loss(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The paper's loss per frame (eq. 4), with noise on the latent (module docstring)."""
+        config = self.config
+        pose, control, generator = self._pose_and_control(batch)
+        latent = noisy = self.encode(pose)
+        if config.latent_noise > 0:
+            draw = standard_normal(latent.shape, generator, pose.device, pose.dtype)
+            noisy = latent + config.latent_noise * draw
+        origin = self._origin(batch)
+        log_prob, _ = self.flow.log_prob(noisy - origin, control)
+        nll = -log_prob.mean() / pose.shape[1]
+        mse = F.mse_loss(self.decode(noisy), pose)
+        terms = {
+            "nll": nll.detach(),
+            "mse": mse.detach(),
+            "latent_std": latent.detach().flatten(0, 1).std(0).mean(),
+        }
+        loss = config.alpha * nll + mse
+        if config.sample_weight > 0 or not self.training:
+            z = standard_normal(latent.shape, generator, pose.device, pose.dtype)
+            drawn, _, _ = self.flow.inverse(z, control)
+            sample_mse = F.mse_loss(self.decode(drawn + origin), pose)
+            loss = loss + config.sample_weight * sample_mse
+            terms["sample_mse"] = sample_mse.detach()
+        return {"loss": loss, **terms}
+
+
+class VariationalFlowVAE(_LatentFlowModel):
+    """The Flow-VAE as a variational autoencoder with the flow as its conditional prior.
+
+    ``loss(batch)`` is the negative ELBO per frame, in nats, of the poses with noise off the
+    pose surface; it needs the items :class:`FlowVAE` needs.
+
+    Args:
+        config: the sizes.
+        normaliser: the statistics the poses are normalised with (the pose noise needs them);
+            a model rebuilt from a checkpoint gets them back with its weights.
+    """
+
+    config_class = VariationalFlowVAEConfig
+
+    def __init__(self, config: VariationalFlowVAEConfig, normaliser=None):
+        super().__init__(config)
+        self.encoder = mlp([POSE_DIM, config.autoencoder_hidden, 2 * config.latent_dim])
+        self.decoder_log_std = nn.Parameter(torch.zeros(POSE_DIM))
+        self.noise = SurfaceNoise(config.pose_noise)
+        if normaliser is not None:
+            self.noise.set_statistics(normaliser)
+
+    def posterior(self, pose: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``q(h | x)``: its mean and log-variance, each ``(..., latent_dim)``."""
+        mean, log_var = self.encoder(pose).chunk(2, dim=-1)
+        return mean, log_var
+
+    def encode(self, pose: torch.Tensor) -> torch.Tensor:
+        """The mean of ``q(h | x)`` ``(..., latent_dim)`` for poses ``(..., 54)``."""
+        return self.posterior(pose)[0]
+
+    def loss(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The negative ELBO per frame (nats), from one draw of ``h ~ q(h | x)``."""
+        pose, control, generator = self._pose_and_control(batch)
+        length = pose.shape[1]
+        noisy_pose = pose + self.noise(pose, generator)
+        mean, log_var = self.posterior(noisy_pose)
+        eps = standard_normal(mean.shape, generator, pose.device, pose.dtype)
+        latent = mean + torch.exp(0.5 * log_var) * eps
+        log_posterior = -0.5 * (eps.square() + log_var + LOG_2PI).sum(-1)  # log q(h | x), (B, L)
+        log_prior, _ = self.flow.log_prob(latent - self._origin(batch), control)  # (B,)
+        residual = (noisy_pose - self.decode(latent)) * torch.exp(-self.decoder_log_std)
+        log_likelihood = -0.5 * (residual.square() + LOG_2PI).sum(-1) - self.decoder_log_std.sum()
+        kl = (log_posterior.sum(1) - log_prior).mean() / length
+        reconstruction = -log_likelihood.mean()
+        return {
+            "loss": reconstruction + kl,
+            "reconstruction": reconstruction.detach(),
+            "kl": kl.detach(),
+            "latent_std": mean.detach().flatten(0, 1).std(0).mean(),
+        }

@@ -1,0 +1,246 @@
+"""The Flow-VAEs: the latent flow's likelihood and generation, each loss term on a known answer,
+the shrinking latent and its remedy, the ELBO's KL against a closed form, bad configs."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from data_synth import generate_conversation
+from gesturelib.checkpoints import CheckpointMismatchError, load_model
+from gesturelib.data import ConversationFeatures, Normaliser, WindowConfig, WindowDataset
+from gesturelib.features import mel_spectrogram
+from gesturelib.models import (
+    FlowVAE,
+    FlowVAEConfig,
+    MoGlow,
+    VariationalFlowVAE,
+    VariationalFlowVAEConfig,
+)
+from gesturelib.sampling import generate
+from gesturelib.train import TrainConfig, train
+
+SIZES = dict(
+    speech_past=2,
+    speech_future=3,
+    past_poses=2,
+    latent_dim=4,
+    autoencoder_hidden=8,
+    steps=2,
+    hidden=8,
+    control_size=8,
+)
+PAPER = FlowVAEConfig(**SIZES)
+ELBO = VariationalFlowVAEConfig(**SIZES)
+
+
+@pytest.fixture(scope="module")
+def data():
+    """A short conversation, its normaliser and three 12-frame windows of it as a batch."""
+    conversation = generate_conversation(8.0, seed=5)
+    features = ConversationFeatures.from_conversation(conversation)
+    normaliser = Normaliser.fit([features])
+    windows = WindowConfig(
+        speech_past=2, speech_future=3, past_poses=2, sequence_length=12, stride=12
+    )
+    dataset = WindowDataset([features], windows, normaliser)
+    batch = {name: torch.stack([dataset[i][name] for i in range(3)]) for name in dataset[0]}
+    return conversation, normaliser, batch, dataset
+
+
+def build(config, normaliser, batch, seed=0, perturb=True):
+    """A model whose flow has seen ``batch`` (ActNorm initialised); with ``perturb`` every weight
+    is moved at random, so that no coupling is an identity."""
+    torch.manual_seed(seed)
+    model = type_of(config)(config, normaliser)
+    model.loss(batch)
+    if perturb:
+        generator = torch.Generator().manual_seed(seed)
+        with torch.no_grad():
+            for parameter in model.parameters():
+                parameter.add_(0.2 * torch.randn(parameter.shape, generator=generator))
+    return model.eval()
+
+
+def type_of(config):
+    return FlowVAE if isinstance(config, FlowVAEConfig) else VariationalFlowVAE
+
+
+def identity_flow(model):
+    """Make the flow a rotation: ActNorm at the identity, couplings at their zero start."""
+    with torch.no_grad():
+        for step in model.flow.steps:
+            step.actnorm.loc.zero_()
+            step.actnorm.log_scale.zero_()
+            step.actnorm.initialized.fill_(True)
+            output = step.coupling.conditioner.output
+            for parameter in (output.weight, output.bias, output.log_gain):
+                parameter.zero_()
+    return model
+
+
+@pytest.mark.parametrize("config", [PAPER, ELBO], ids=["paper", "elbo"])
+def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config):
+    _, normaliser, batch, _ = data
+    model = build(config, normaliser, batch).double()
+    batch = {name: part.double() for name, part in batch.items()}
+    cond = model.control(batch)
+    latent = model.encode(batch["pose"]) - model._origin(batch)
+    log_prob, _ = model.flow.log_prob(latent, cond)
+    state, total = None, torch.zeros(3, dtype=torch.float64)
+    for t in range(latent.shape[1]):
+        frame_log_prob, state = model.flow.log_prob(latent[:, t : t + 1], cond[:, t : t + 1], state)
+        total = total + frame_log_prob
+    torch.testing.assert_close(total, log_prob)
+    z = torch.randn(latent.shape, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    drawn, _, _ = model.flow.inverse(z, cond)
+    state, frames = None, []
+    with model.generating():
+        for t in range(z.shape[1]):
+            frame = {name: part[:, t : t + 1] for name, part in batch.items()}
+            pose, state = model.step(frame, state, z[:, t])
+            frames.append(pose)
+    expected = model.decode(drawn + model._origin(batch))
+    torch.testing.assert_close(torch.stack(frames, dim=1), expected)
+
+
+def test_each_term_of_the_papers_loss_on_a_known_answer(data):
+    _, normaliser, batch, _ = data
+    config = dataclasses.replace(PAPER, latent_noise=0.0, alpha=0.3, residual=False)
+    model = identity_flow(build(config, normaliser, batch, perturb=False)).double()
+    batch = {name: part.double() for name, part in batch.items()}
+    pose, length = batch["pose"], batch["pose"].shape[1]
+    terms = model.loss(batch)
+    latent = model.encode(pose)
+    # A rotation keeps lengths and has log-determinant 0: NLL is the standard normal's.
+    nll = (0.5 * latent.square().sum(-1) + 0.5 * 4 * math.log(2 * math.pi)).sum(1).mean() / length
+    torch.testing.assert_close(terms["nll"], nll)
+    torch.testing.assert_close(terms["mse"], (model.decode(latent) - pose).square().mean())
+    # In evaluation the draw z' comes from a generator seeded 0; the flow maps it by a rotation.
+    generator = torch.Generator().manual_seed(0)
+    z = torch.randn(latent.shape, generator=generator, dtype=torch.float64)
+    drawn, _, _ = model.flow.inverse(z, model.control(batch))
+    torch.testing.assert_close(drawn.norm(dim=-1), z.norm(dim=-1))
+    sample_mse = (model.decode(drawn) - pose).square().mean()
+    torch.testing.assert_close(terms["sample_mse"], sample_mse)
+    torch.testing.assert_close(terms["loss"], 0.3 * nll + terms["mse"] + sample_mse)
+    without = FlowVAE(dataclasses.replace(config, sample_weight=0.0)).double()
+    without.load_state_dict(model.state_dict())
+    torch.testing.assert_close(without.eval().loss(batch)["loss"], 0.3 * nll + terms["mse"])
+
+
+def test_a_shrunken_latent_buys_likelihood_for_nothing_unless_the_latent_is_noisy(data):
+    _, normaliser, batch, _ = data
+    batch = {name: part.double() for name, part in batch.items()}
+    nll, clean, extra = {}, {}, {}
+    for noise in (0.0, 0.1):
+        for shrink in (1.0, 0.1):
+            torch.manual_seed(0)
+            model = FlowVAE(dataclasses.replace(PAPER, latent_noise=noise)).double()
+            with (
+                torch.no_grad()
+            ):  # the encoder's output times `shrink`, the decoder's input over it
+                model.encoder[-1].weight.mul_(shrink)
+                model.encoder[-1].bias.mul_(shrink)
+                model.decoder[0].weight.div_(shrink)
+            model.loss(batch)  # ActNorm initialises on the latents it is given
+            terms = model.eval().loss(batch)
+            reconstruction = model.decode(model.encode(batch["pose"]))
+            clean[noise, shrink] = (reconstruction - batch["pose"]).square().mean().item()
+            nll[noise, shrink] = terms["nll"].item()
+            extra[noise, shrink] = terms["mse"].item() - clean[noise, shrink]
+    # The decoder undoes the shrinking, and without noise so does the flow's first ActNorm: the
+    # likelihood of each frame's latent gains exactly latent_dim * log 10 nats, for nothing.
+    assert clean[0.0, 0.1] == pytest.approx(clean[0.0, 1.0], rel=1e-9)
+    assert nll[0.0, 1.0] - nll[0.0, 0.1] == pytest.approx(4 * math.log(10), rel=1e-3)
+    # With noise a shrunken latent drowns in it: the noise costs the decoder far more.
+    assert extra[0.1, 0.1] > 10 * extra[0.1, 1.0] > 0
+
+
+def test_the_elbos_kl_estimate_matches_the_closed_form_for_an_affine_flow(data):
+    _, normaliser, batch, _ = data
+    config = dataclasses.replace(ELBO, residual=False, pose_noise=0.0)
+    model = identity_flow(build(config, normaliser, batch, perturb=False)).double()
+    with torch.no_grad():  # a flow that is an affine map: ActNorm's scale and shift, rotations
+        for step in model.flow.steps:
+            step.actnorm.loc.copy_(torch.tensor([0.5, -1.0, 0.2, 0.0]))
+            step.actnorm.log_scale.copy_(torch.tensor([0.3, -0.2, 0.1, 0.4]))
+    many = {
+        name: part.double().repeat(400, *[1] * (part.dim() - 1)) for name, part in batch.items()
+    }
+    model.train()  # a fresh draw of h for each of the 1200 copies
+    torch.manual_seed(0)
+    estimate = model.loss(many)["kl"].item()
+    # The flow is z = A h + b: p(h) = N(mean, cov) with A^-1 and b from the composed map.
+    with torch.no_grad():
+        eye = torch.eye(4, dtype=torch.float64)
+        matrix, shift = eye, torch.zeros(4, dtype=torch.float64)
+        for step in model.flow.steps:
+            scale = torch.diag(torch.exp(step.actnorm.log_scale))
+            linear = step.linear.weight_matrix()
+            matrix = linear @ scale @ matrix
+            shift = linear @ (scale @ (shift - step.actnorm.loc))
+        inverse = torch.linalg.inv(matrix)
+        prior_mean, prior_cov = -inverse @ shift, inverse @ inverse.T
+        mean, log_var = model.posterior(batch["pose"].double())
+        prior = torch.distributions.MultivariateNormal(prior_mean, prior_cov)
+        posterior = torch.distributions.MultivariateNormal(mean, torch.diag_embed(log_var.exp()))
+        closed = torch.distributions.kl_divergence(posterior, prior).mean().item()
+    assert estimate == pytest.approx(closed, abs=0.05 * abs(closed) + 0.05)
+
+
+def test_the_elbo_reconstruction_is_a_gaussian_log_likelihood(data):
+    _, normaliser, batch, _ = data
+    model = build(ELBO, normaliser, batch).double()
+    with torch.no_grad():
+        model.decoder_log_std.fill_(math.log(0.5))
+        model.encoder[-1].weight[4:].zero_()  # log-variances of -30: h is the posterior's mean
+        model.encoder[-1].bias[4:].fill_(-30.0)
+        model.noise.std = 0.0
+    batch = {name: part.double() for name, part in batch.items()}
+    terms = model.loss(batch)
+    decoded = model.decode(model.encode(batch["pose"]))
+    expected = -torch.distributions.Normal(decoded, 0.5).log_prob(batch["pose"]).sum(-1).mean()
+    torch.testing.assert_close(terms["reconstruction"], expected)
+    torch.testing.assert_close(terms["loss"], terms["reconstruction"] + terms["kl"])
+
+
+@pytest.mark.parametrize("config", [PAPER, ELBO], ids=["paper", "elbo"])
+def test_generation_is_deterministic_at_temperature_zero_and_by_seed(data, config):
+    conversation, normaliser, batch, _ = data
+    model = build(config, normaliser, batch)
+    speech = mel_spectrogram(conversation.audio, conversation.sample_rate)[:60]
+    activity = conversation.activity[:60]
+    cold = [generate(model, normaliser, speech, activity, temperature=0, seed=s) for s in (1, 2)]
+    np.testing.assert_array_equal(*cold)
+    same = [generate(model, normaliser, speech, activity, seed=3) for _ in range(2)]
+    np.testing.assert_array_equal(*same)
+    assert same[0].shape == (1, 60, 9, 6)
+    assert not np.array_equal(same[0], generate(model, normaliser, speech, activity, seed=4))
+
+
+def test_a_flowvae_trains_and_its_run_folder_is_no_moglows(data, tmp_path):
+    _, normaliser, _, dataset = data
+    model = FlowVAE(PAPER)
+    history = train(model, dataset, dataset, TrainConfig.quick(epochs=2), tmp_path, progress=False)
+    assert history.val["sample_mse"] and "sample_mse" in history.train
+    assert isinstance(load_model(tmp_path / "best.pt", FlowVAE), FlowVAE)
+    with pytest.raises(CheckpointMismatchError):
+        load_model(tmp_path / "best.pt", MoGlow)
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"alpha": -1.0}, "alpha must be a finite number >= 0"),
+        ({"latent_dim": 54}, "latent_dim must be between 2 and 53"),
+        ({"latent_dim": 1}, "latent_dim must be between 2 and 53"),
+        ({"sample_weight": float("nan")}, "sample_weight must be a finite number >= 0"),
+        ({"residual": True, "past_poses": 0}, "past_poses >= 1"),
+    ],
+)
+def test_bad_configs_get_named_errors(changes, message):
+    with pytest.raises(ValueError, match=message):
+        FlowVAEConfig(**changes)
