@@ -222,3 +222,20 @@ def test_train_into_a_folder_it_cannot_make_says_so_in_one_line(tiny_data, tmp_p
     assert main(["train", "aud2pose", "--out", str(out), "--quick", "--data", str(tiny_data)]) == 2
     assert capsys.readouterr().err.count("\n") == 1
     assert blocker.read_text() == "a file where a folder would be needed"
+
+
+@pytest.mark.parametrize("model", ["flowvae", "flowvae_elbo"])
+def test_the_flowvaes_train_generate_and_describe_themselves(model, tiny_data, tmp_path, capsys):
+    run = tmp_path / model
+    assert main(["train", model, "--out", str(run), "--quick", "--data", str(tiny_data)]) == 0
+    assert main(["info", str(run)]) == 0
+    assert "VariationalFlowVAE" in capsys.readouterr().out or model == "flowvae"
+    samples = write_wav(tmp_path / "speech.wav", seconds=1.5)
+    motions = []
+    for out in ("a", "b"):
+        folder = tmp_path / out
+        args = ["generate", str(run), "--audio", str(tmp_path / "speech.wav"), "--out", str(folder)]
+        assert main([*args, "--no-video", "--seed", "3"]) == 0
+        motions.append(np.load(folder / "motion.npz")["rotations"])
+    assert motions[0].shape == (samples * 25 // 16_000, 9, 6)
+    np.testing.assert_array_equal(*motions)
