@@ -19,6 +19,7 @@ from gesturelib.models import (
     VariationalFlowVAE,
     VariationalFlowVAEConfig,
 )
+from gesturelib.models.flowvae import latent_scale
 from gesturelib.sampling import generate
 from gesturelib.train import TrainConfig, train
 
@@ -244,3 +245,14 @@ def test_a_flowvae_trains_and_its_run_folder_is_no_moglows(data, tmp_path):
 def test_bad_configs_get_named_errors(changes, message):
     with pytest.raises(ValueError, match=message):
         FlowVAEConfig(**changes)
+
+
+def test_latent_scale_is_the_geometric_mean_spread_along_the_principal_axes():
+    generator = torch.Generator().manual_seed(0)
+    white = torch.randn(20_000, 3, generator=generator, dtype=torch.float64)
+    rotation = torch.linalg.qr(torch.randn(3, 3, generator=generator, dtype=torch.float64))[0]
+    stretched = white * torch.tensor([4.0, 1.0, 0.25], dtype=torch.float64) @ rotation.T
+    assert latent_scale(stretched).item() == pytest.approx(1.0, rel=0.02)  # (4 * 1 / 4)^(1/3)
+    assert latent_scale(0.1 * stretched).item() == pytest.approx(0.1, rel=0.02)
+    collapsed = torch.cat([white[:, :2], white[:, :1]], dim=1)  # a copy: one dimension fewer
+    assert latent_scale(collapsed).item() < 0.01  # 0 but for rounding

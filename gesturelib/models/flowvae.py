@@ -38,9 +38,9 @@ of the last pose, ``h_t - e(x_{t-1})``, a shift by a known vector (log-determina
 
 Logged scalars (``loss(batch)``), all per frame: :class:`FlowVAE`: ``loss``, ``nll`` (of the
 latent, nats), ``mse`` (of ``d(h)``, per number), ``sample_mse`` (of ``d(h')``; always on the
-validation data, in training only if it is in the loss) and ``latent_std`` (the spread of ``h``);
-:class:`VariationalFlowVAE`: ``loss`` (= -ELBO, nats), ``reconstruction`` (-E log p(x | h)),
-``kl`` and ``latent_std``.
+validation data, in training only if it is in the loss) and ``latent_scale`` (of ``h``:
+:func:`latent_scale`); :class:`VariationalFlowVAE`: ``loss`` (= -ELBO, nats), ``reconstruction``
+(-E log p(x | h)), ``kl`` and ``latent_scale`` (of the posterior means).
 """
 
 from __future__ import annotations
@@ -61,6 +61,19 @@ from gesturelib.runtime import standard_normal
 from gesturelib.skeleton import POSE_DIM
 
 LOG_2PI = float(torch.log(torch.tensor(2 * torch.pi)))
+
+
+def latent_scale(latent: torch.Tensor) -> torch.Tensor:
+    """The spread of latents ``(..., D)``: the geometric mean of their standard deviations along
+    their principal axes, ``det(Cov)^(1 / 2D)``.
+
+    A flow's log-likelihood of the latents rises by ``log`` of this for every number it models
+    when the latents shrink, or collapse onto fewer dimensions (then it tends to 0), so it is
+    the scale a deterministic encoder is tempted to reduce.
+    """
+    frames = latent.reshape(-1, latent.shape[-1]).double()
+    variances = torch.linalg.eigvalsh(torch.cov(frames.T)).clamp_min(1e-30)
+    return variances.log().mean().mul(0.5).exp().to(latent.dtype)
 
 
 @dataclass(frozen=True)
@@ -247,7 +260,7 @@ class FlowVAE(_LatentFlowModel):
         terms = {
             "nll": nll.detach(),
             "mse": mse.detach(),
-            "latent_std": latent.detach().flatten(0, 1).std(0).mean(),
+            "latent_scale": latent_scale(latent.detach()),
         }
         loss = config.alpha * nll + mse
         if config.sample_weight > 0 or not self.training:
@@ -308,5 +321,5 @@ class VariationalFlowVAE(_LatentFlowModel):
             "loss": reconstruction + kl,
             "reconstruction": reconstruction.detach(),
             "kl": kl.detach(),
-            "latent_std": mean.detach().flatten(0, 1).std(0).mean(),
+            "latent_scale": latent_scale(mean.detach()),
         }
