@@ -33,6 +33,8 @@ The rules (defaults in brackets; parameters in :mod:`data_synth.config`):
   style; the motion seed the details of the motion. :func:`resample_motion` draws another motion
   for the same conversation: the spread between draws is the floor no model can beat.
 
+Gaps in the motion, as a tracker loses keypoints: :mod:`data_synth.occlusion`.
+
 How each rule is measured: :mod:`data_synth.emphasis` (beat timing from the audio alone) and
 :mod:`gesturelib.metrics`. The dataset on disk: :mod:`data_synth.dataset` and
 ``python -m data_synth --out DIR``.
@@ -66,6 +68,7 @@ from data_synth.dataset import (
 )
 from data_synth.emphasis import emphasis_envelope, measure_stroke_lead
 from data_synth.events import Events
+from data_synth.occlusion import occlude, occlusion_mask
 from data_synth.style import Style
 
 __version__ = GENERATOR_VERSION
@@ -90,6 +93,8 @@ __all__ = [
     "load_dataset",
     "load_split",
     "measure_stroke_lead",
+    "occlude",
+    "occlusion_mask",
     "read_manifest",
     "resample_motion",
     "save_conversation",

@@ -14,7 +14,7 @@ speech cannot explain, the floor that no model can beat.
 
 Files (:func:`save_conversation`, :func:`load_conversation`): ``STEM.wav`` (the mono mix, 16-bit
 PCM), ``STEM.npz`` (``activity`` ``(T,)``, ``rotations`` ``(T, 9, 6)``, ``positions``
-``(T, 9, 3)``) and ``STEM.json`` (seeds, rates, duration, style, voices, configuration, events,
+``(T, 9, 3)``, and ``visible`` ``(T, 9)`` where a tracker lost limbs: :mod:`data_synth.occlusion`) and ``STEM.json`` (seeds, rates, duration, style, voices, configuration, events,
 all readable in a text editor). Loading checks what it reads (shapes, finite motion, activity
 codes in range) and raises :class:`DatasetError` naming the damaged file.
 """
@@ -86,6 +86,8 @@ class Conversation:
         voices: ``{"A": Voice, "B": Voice}``.
         conversation_seed, motion_seed: the two seeds.
         config: the configuration it was generated with.
+        visible: ``(T, 9)`` bool, False where a limb was not seen (its rotation is then a
+            placeholder: :func:`data_synth.occlusion.occlude`); None when every limb was seen.
     """
 
     audio: np.ndarray
@@ -100,6 +102,7 @@ class Conversation:
     conversation_seed: int
     motion_seed: int
     config: ConversationConfig
+    visible: np.ndarray | None = None
 
     @property
     def duration_s(self) -> float:
@@ -303,13 +306,15 @@ def save_conversation(
             f"{', '.join(existing)} already exist(s); pass overwrite=True to replace"
         )
     save_audio(paths["audio"], conversation.audio, conversation.sample_rate, overwrite=True)
+    arrays = {
+        "activity": conversation.activity,
+        "rotations": conversation.rotations,
+        "positions": conversation.positions,
+    }
+    if conversation.visible is not None:
+        arrays["visible"] = conversation.visible
     with open(paths["arrays"], "wb") as file:
-        np.savez_compressed(
-            file,
-            activity=conversation.activity,
-            rotations=conversation.rotations,
-            positions=conversation.positions,
-        )
+        np.savez_compressed(file, **arrays)
     metadata = {
         "format": FILE_FORMAT,
         "generator_version": GENERATOR_VERSION,
@@ -374,6 +379,7 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
                 arrays["rotations"],
                 arrays["positions"],
             )
+            visible = arrays["visible"] if "visible" in arrays else None
     except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as error:
         raise DatasetError(
             f"{paths['arrays']} is damaged or truncated ({error}); {_REWRITE}"
@@ -384,7 +390,12 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
             f"{num_samples}; {_REWRITE}"
         )
     _check_arrays(
-        paths["arrays"], num_frames(num_samples, sample_rate, fps), activity, rotations, positions
+        paths["arrays"],
+        num_frames(num_samples, sample_rate, fps),
+        activity,
+        rotations,
+        positions,
+        visible,
     )
     return Conversation(
         audio,
@@ -399,11 +410,18 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
         seeds[0],
         seeds[1],
         config,
+        visible,
     )
 
 
-def _check_arrays(path: Path, n_frames: int, activity, rotations, positions) -> None:
-    """The arrays of a ``.npz`` file: shapes, integer codes in range, finite motion."""
+def _check_arrays(path: Path, n_frames: int, activity, rotations, positions, visible) -> None:
+    """The arrays of a ``.npz`` file: shapes, integer codes in range, finite motion, a boolean
+    mask of seen limbs (if any)."""
+    if visible is not None and (visible.shape != (n_frames, NUM_JOINTS) or visible.dtype != bool):
+        raise DatasetError(
+            f"{path}: visible must be a bool mask of shape {(n_frames, NUM_JOINTS)}, got "
+            f"{visible.dtype} {visible.shape}; {_REWRITE}"
+        )
     expected = {
         "activity": (n_frames,),
         "rotations": (n_frames, NUM_JOINTS, 6),

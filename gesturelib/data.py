@@ -153,8 +153,9 @@ class ConversationFeatures:
 
         Raises:
             TypeError: if ``conversation`` lacks the attributes of :class:`ConversationLike`.
-            ValueError: for wrong shapes, lengths or frame rate, or non-finite rotations;
-                :class:`~gesturelib.features.AudioError` for unusable audio.
+            ValueError: for wrong shapes, lengths or frame rate, non-finite rotations, or limbs
+                marked unseen in ``conversation.visible``; :class:`~gesturelib.features.AudioError`
+                for unusable audio.
         """
         missing = [
             name
@@ -174,6 +175,13 @@ class ConversationFeatures:
         if conversation.fps != FPS:
             raise ValueError(
                 f"conversation runs at {conversation.fps} fps; the models expect {FPS} fps"
+            )
+        visible = getattr(conversation, "visible", None)
+        if visible is not None and not np.all(visible):
+            raise ValueError(
+                f"conversation has limbs a tracker did not see ({int(np.size(visible) - np.sum(visible))} "
+                "limb-frames marked in conversation.visible): fill the gaps first, e.g. with the "
+                "imputing autoencoder of notebook 06, and train on the filled motion"
             )
         speech = mel_spectrogram(
             conversation.audio, conversation.sample_rate, fps=conversation.fps, n_mels=n_mels
