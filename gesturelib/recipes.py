@@ -15,6 +15,9 @@ name                model                   trained on
 ``motion_dae``      the denoising            excerpts of 1 s (its frames independent); stage 1 of
                     autoencoder             ``aud2repr2pose``
 ``aud2repr2pose``   :class:`Aud2Repr2Pose`  single frames; built around a trained ``motion_dae``
+``imputation_dae``  the denoising            excerpts of 1 s, cut into windows of 5 poses: the
+                    autoencoder of the      Flow-VAE paper's filler of lost limbs
+                    Flow-VAE paper
 ==================  ======================  ==========================================================
 """
 
@@ -153,6 +156,15 @@ RECIPES: dict[str, Recipe] = {
         MotionDAEConfig.quick(),
         TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5),
         TrainConfig.quick(epochs=8, batch_size=16, warmup_steps=100),
+    ),
+    "imputation_dae": Recipe(
+        MotionDenoisingAutoencoder,
+        WindowConfig(sequence_length=25, stride=5, past_poses=0),
+        WindowConfig(sequence_length=25, stride=5, past_poses=0),
+        MotionDAEConfig.taylor(),
+        MotionDAEConfig.taylor(hidden_sizes=(32, 16), representation_dim=12),
+        TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5, drop_last=True),
+        TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=50, drop_last=True),
     ),
     "aud2repr2pose": Recipe(
         Aud2Repr2Pose,

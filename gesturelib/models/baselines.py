@@ -252,42 +252,81 @@ class Aud2Pose(nn.Module):
 
 @dataclass(frozen=True)
 class MotionDAEConfig:
-    """Sizes of the denoising autoencoder of poses (MotionE + MotionD).
+    """Sizes and corruption of the denoising autoencoder of motion (MotionE + MotionD).
+
+    Two papers use one: Kucherenko et al. on single poses with Gaussian noise (the defaults), and
+    the Flow-VAE paper on windows of 5 poses with 10 % of the limb rotations zeroed, to fill the
+    limbs a tracker lost (:meth:`taylor`).
 
     Attributes:
         pose_dim: numbers per pose (54).
-        hidden_sizes: layers between the pose and the representation (mirrored in the decoder);
-            () is the paper's one layer each way.
-        representation_dim: size of the representation ``r`` (the paper: 325 of 384 inputs).
+        hidden_sizes: layers between the input and the representation (mirrored in the decoder);
+            () is Kucherenko et al.'s one layer each way.
+        representation_dim: size of the representation ``r`` (Kucherenko et al.: 325 of 384
+            inputs; the Flow-VAE paper: 30).
         noise_std: standard deviation of the Gaussian noise added to the (standardised) input
             while training.
+        window: consecutive poses in one input (1: frames independent).
+        mask_rate: share of limb rotations zeroed in the input while training (zero is the mean
+            pose, in normalised units).
+        batch_norm: batch normalisation after the first layer (the Flow-VAE paper's).
     """
 
     pose_dim: int = POSE_DIM
     hidden_sizes: tuple[int, ...] = ()
     representation_dim: int = 24
     noise_std: float = 0.05
+    window: int = 1
+    mask_rate: float = 0.0
+    batch_norm: bool = False
 
     def __post_init__(self):
         check_fields(
             self,
-            positive=("pose_dim", "representation_dim"),
+            positive=("pose_dim", "representation_dim", "window"),
             sizes=("hidden_sizes",),
             non_negative=("noise_std",),
+            fractions=("mask_rate",),
+            flags=("batch_norm",),
         )
+        if self.pose_dim % 6:
+            raise ValueError(f"MotionDAEConfig.pose_dim must be 6 per limb, got {self.pose_dim}")
 
     @classmethod
     def quick(cls, **changes) -> MotionDAEConfig:
         """A small representation for tests and quick mode; ``changes`` override any field."""
         return dataclasses.replace(cls(representation_dim=8), **changes)
 
+    @classmethod
+    def taylor(cls, **changes) -> MotionDAEConfig:
+        """The Flow-VAE paper's (section 4.2): windows of 5 poses, 10 % of the limb rotations
+        zeroed, a 70-50-30 encoder with batch normalisation after the first layer."""
+        paper = cls(
+            hidden_sizes=(70, 50),
+            representation_dim=30,
+            noise_std=0.0,
+            window=5,
+            mask_rate=0.1,
+            batch_norm=True,
+        )
+        return dataclasses.replace(paper, **changes)
+
+
+class _FrameBatchNorm(nn.BatchNorm1d):
+    """Batch normalisation of features ``(..., C)`` over every leading axis."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return super().forward(x.reshape(-1, x.shape[-1])).reshape(x.shape)
+
 
 class MotionDenoisingAutoencoder(nn.Module):
-    """Stage 1 of Aud2Repr2Pose: pose ``(..., 54)`` -> representation ``(..., r)`` -> pose.
+    """A window of poses ``(..., window * 54)`` -> representation ``(..., r)`` -> the window.
 
-    The representation layer has a tanh, as the hidden layer of a classic denoising autoencoder;
-    the decoder's output is linear. ``loss(batch)`` adds noise to ``batch["pose"] (B, L, 54)``
-    and logs ``loss`` = ``mse``, the error to the clean pose per number.
+    Stage 1 of Aud2Repr2Pose (``window=1``), and the Flow-VAE paper's filler of lost limbs. The
+    representation layer has a tanh, as the hidden layer of a classic denoising autoencoder;
+    the decoder's output is linear. ``loss(batch)`` cuts ``batch["pose"] (B, L, 54)`` into
+    windows, corrupts them (noise, zeroed limbs) and logs ``loss`` = ``mse``, the error to the
+    clean windows per number.
     """
 
     config_class = MotionDAEConfig
@@ -295,29 +334,59 @@ class MotionDenoisingAutoencoder(nn.Module):
     def __init__(self, config: MotionDAEConfig):
         super().__init__()
         self.config = config
-        sizes = [config.pose_dim, *config.hidden_sizes, config.representation_dim]
-        self.encoder = nn.Sequential(mlp(sizes), nn.Tanh())  # MotionE
+        inputs = config.window * config.pose_dim
+        sizes = [inputs, *config.hidden_sizes, config.representation_dim]
+        layers = mlp(sizes)
+        if config.batch_norm:
+            layers.insert(1, _FrameBatchNorm(sizes[1]))
+        self.encoder = nn.Sequential(layers, nn.Tanh())  # MotionE
         self.decoder = mlp(sizes[::-1])  # MotionD
 
-    def encode(self, pose: torch.Tensor) -> torch.Tensor:
-        """MotionE: ``(..., 54)`` -> ``(..., representation_dim)``, each number in (-1, 1)."""
-        return self.encoder(pose)
+    def encode(self, poses: torch.Tensor) -> torch.Tensor:
+        """MotionE: ``(..., window * 54)`` -> ``(..., representation_dim)``, each in (-1, 1)."""
+        return self.encoder(poses)
 
     def decode(self, representation: torch.Tensor) -> torch.Tensor:
-        """MotionD: ``(..., representation_dim)`` -> ``(..., 54)``."""
+        """MotionD: ``(..., representation_dim)`` -> ``(..., window * 54)``."""
         return self.decoder(representation)
 
-    def forward(self, pose: torch.Tensor) -> torch.Tensor:
-        """The reconstruction of clean poses: ``(..., 54)`` -> ``(..., 54)``."""
-        return self.decode(self.encode(pose))
+    def forward(self, poses: torch.Tensor) -> torch.Tensor:
+        """The reconstruction: ``(..., window * 54)`` -> ``(..., window * 54)``."""
+        return self.decode(self.encode(poses))
 
     def loss(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """MSE between the clean pose and the reconstruction of a noisy copy of it."""
-        dim = self.config.pose_dim
-        (pose,) = batch_parts(batch, {"pose": (dim,)}, "MotionDenoisingAutoencoder.loss")
-        noisy = pose + self.config.noise_std * torch.randn_like(pose)
-        mse = (self(noisy) - pose).pow(2).mean()
+        """MSE between clean windows of poses and the reconstruction of corrupted copies."""
+        config = self.config
+        (pose,) = batch_parts(
+            batch, {"pose": (config.pose_dim,)}, "MotionDenoisingAutoencoder.loss"
+        )
+        windows = pose.unfold(1, config.window, 1).transpose(-1, -2)  # (B, L - w + 1, w, 54)
+        clean = windows.flatten(-2)
+        corrupted = clean
+        if config.mask_rate > 0:
+            limbs = windows.unflatten(-1, (-1, 6))  # (B, L', w, 9, 6)
+            kept = torch.rand(limbs.shape[:-1], device=pose.device) >= config.mask_rate
+            corrupted = (limbs * kept[..., None]).flatten(-3)
+        corrupted = corrupted + config.noise_std * torch.randn_like(clean)
+        mse = (self(corrupted) - clean).pow(2).mean()
         return {"loss": mse, "mse": mse.detach()}
+
+    @torch.no_grad()
+    def fill(self, pose: torch.Tensor, visible: torch.Tensor) -> torch.Tensor:
+        """Poses ``(T, 54)`` (normalised) whose limbs hidden in ``visible (T, 9)`` are replaced
+        by the reconstruction of the window centred on their frame (the edges padded with the
+        first and last pose); the seen limbs are kept as they are."""
+        window, limbs = self.config.window, self.config.pose_dim // 6
+        hidden = ~visible.to(torch.bool)
+        zeroed = (pose.unflatten(-1, (limbs, 6)) * (~hidden)[..., None]).flatten(-2)
+        half = window // 2
+        padded = torch.cat(
+            [zeroed[:1].expand(half, -1), zeroed, zeroed[-1:].expand(window - 1 - half, -1)]
+        )
+        windows = padded.unfold(0, window, 1).transpose(-1, -2).flatten(-2)  # (T, w * 54)
+        with eval_mode(self):  # batch norm with its running statistics
+            centre = self(windows).unflatten(-1, (window, -1))[:, half]  # (T, 54)
+        return torch.where(hidden.repeat_interleave(6, dim=-1), centre, pose)
 
 
 # ---------------------------------------------------------------------------------------------
