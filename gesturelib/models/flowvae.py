@@ -34,7 +34,10 @@ surface (:mod:`gesturelib.pose_surface`), so its bound and MoGlow's likelihood a
 nats. Generation decodes the decoder's mean.
 
 Both have ``residual`` (as MoGlow): the flow models the change of the latent from the encoding
-of the last pose, ``h_t - e(x_{t-1})``, a shift by a known vector (log-determinant 0).
+of the last pose, ``h_t - e(x_{t-1})``, a shift by a known vector (log-determinant 0). In
+generation the change is added to the last *generated* latent, carried from frame to frame, not
+to the encoding of the pose decoded from it: encoding and decoding do not quite undo each other,
+and repeated at every frame that small error would pull the motion off course.
 
 Logged scalars (``loss(batch)``), all per frame: :class:`FlowVAE`: ``loss``, ``nll`` (of the
 latent, nats), ``mse`` (of ``d(h)``, per number), ``sample_mse`` (of ``d(h')``; always on the
@@ -117,14 +120,14 @@ class FlowVAEConfig(LatentFlowConfig):
     """The paper's Flow-VAE: :class:`LatentFlowConfig` and the weights of its loss.
 
     Attributes:
-        alpha: weight of the latent's NLL (the paper: 5e-4, for its scale of losses).
+        alpha: weight of the latent's NLL (the paper's 5e-4).
         sample_weight: weight of ``MSE(x, d(h'))``, the term with a latent drawn from the flow
             (the paper: 1; 0 leaves it out).
         latent_noise: standard deviation of the noise added to ``h`` (0: none, and the encoder
             can shrink its latent without end; see the module docstring).
     """
 
-    alpha: float = 0.01
+    alpha: float = 5e-4
     sample_weight: float = 1.0
     latent_noise: float = 0.1
 
@@ -205,13 +208,19 @@ class _LatentFlowModel(nn.Module):
         Args:
             frame: the control of one frame, as a batch with ``L = 1`` (``past_pose
                 (B, 1, tau, 54)``, the model's own recent output; ``speech``, ``activity``).
-            state: the flow's state after the previous frame (None at the start).
+            state: ``(the flow's state, the last latent)`` after the previous frame (None at
+                the start). A residual model adds its latent change to the last latent itself,
+                not to the encoding of the pose decoded from it.
             noise: ``z_t`` ``(B, latent_dim)``, already scaled by the temperature.
         Returns:
             ``(pose (B, 54), state)``, the pose normalised.
         """
-        latent, _, state = self.flow.inverse(noise[:, None], self.control(frame), state)
-        return self.decode(latent + self._origin(frame))[:, 0], state
+        flow_state, last = (None, None) if state is None else state
+        if last is None:
+            last = self._origin(frame)
+        latent, _, flow_state = self.flow.inverse(noise[:, None], self.control(frame), flow_state)
+        latent = latent + last
+        return self.decode(latent)[:, 0], (flow_state, latent)
 
     def _origin(self, batch) -> torch.Tensor | float:
         """What the flow's latents are measured from: the encoding of the last pose
