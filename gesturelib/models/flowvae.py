@@ -216,10 +216,9 @@ class _LatentFlowModel(nn.Module):
             ``(pose (B, 54), state)``, the pose normalised.
         """
         flow_state, last = (None, None) if state is None else state
-        if last is None:
-            last = self._origin(frame)
         latent, _, flow_state = self.flow.inverse(noise[:, None], self.control(frame), flow_state)
-        latent = latent + last
+        if self.config.residual:
+            latent = latent + (self._origin(frame) if last is None else last)
         return self.decode(latent)[:, 0], (flow_state, latent)
 
     def _origin(self, batch) -> torch.Tensor | float:
