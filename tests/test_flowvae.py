@@ -202,7 +202,7 @@ def test_the_elbo_reconstruction_is_a_gaussian_log_likelihood(data):
     _, normaliser, batch, _ = data
     model = build(ELBO, normaliser, batch).double()
     with torch.no_grad():
-        model.decoder_log_std.fill_(math.log(0.5))
+        model.decoder_variance.fill_(0.25)
         model.encoder[-1].weight[4:].zero_()  # log-variances of -30: h is the posterior's mean
         model.encoder[-1].bias[4:].fill_(-30.0)
         model.noise.std = 0.0
@@ -262,3 +262,19 @@ def test_latent_scale_is_the_geometric_mean_spread_along_the_principal_axes():
     assert latent_scale(0.1 * stretched).item() == pytest.approx(0.1, rel=0.02)
     collapsed = torch.cat([white[:, :2], white[:, :1]], dim=1)  # a copy: one dimension fewer
     assert latent_scale(collapsed).item() < 0.01  # 0 but for rounding
+
+
+def test_the_decoders_variance_follows_its_squared_error_in_training_only(data):
+    _, normaliser, batch, _ = data
+    model = build(ELBO, normaliser, batch)
+    before = model.decoder_variance.clone()
+    model.loss(batch)  # evaluation: fixed
+    assert torch.equal(model.decoder_variance, before)
+    model.train()
+    for _ in range(200):
+        model.loss(batch)
+    with torch.no_grad():
+        mean, _ = model.posterior(batch["pose"])
+        error = (model.decode(mean) - batch["pose"]).square().flatten(0, 1).mean(0)
+    ratio = model.decoder_variance / error
+    assert 0.5 < ratio.median() < 2  # near the squared error, up to the draws of h and noise

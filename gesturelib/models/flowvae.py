@@ -24,8 +24,8 @@ shrunken latent drowns in the noise and can no longer be decoded. That makes the
 Gaussian with fixed variance, and the loss a weighted, beta-VAE-like objective.
 
 :class:`VariationalFlowVAE` makes it a true ELBO on ``log p(x | c)``: a Gaussian encoder
-``q(h | x)``, the flow as the conditional prior ``p(h | c)``, and a Gaussian decoder with a learned
-standard deviation per pose number,
+``q(h | x)``, the flow as the conditional prior ``p(h | c)``, and a Gaussian decoder with a
+variance per pose number (the running mean of its squared error, fixed in evaluation),
 
     log p(x | c) >= E_q[log p(x | h)] - E_q[log q(h | x) - log p_flow(h | c)],
 
@@ -293,11 +293,16 @@ class VariationalFlowVAE(_LatentFlowModel):
     """
 
     config_class = VariationalFlowVAEConfig
+    #: How far each training batch moves the decoder's variance towards its squared error.
+    variance_momentum = 0.05
 
     def __init__(self, config: VariationalFlowVAEConfig, normaliser=None):
         super().__init__(config)
         self.encoder = mlp([POSE_DIM, config.autoencoder_hidden, 2 * config.latent_dim])
-        self.decoder_log_std = nn.Parameter(torch.zeros(POSE_DIM))
+        # The decoder's variance per pose number, set to the running mean of its squared error
+        # while training (the variance that maximises the likelihood, as a calibrated decoder's),
+        # and fixed in evaluation. Learned by gradient instead, it lags far behind the error.
+        self.register_buffer("decoder_variance", torch.ones(POSE_DIM))
         self.noise = SurfaceNoise(config.pose_noise)
         if normaliser is not None:
             self.noise.set_statistics(normaliser)
@@ -321,8 +326,13 @@ class VariationalFlowVAE(_LatentFlowModel):
         latent = mean + torch.exp(0.5 * log_var) * eps
         log_posterior = -0.5 * (eps.square() + log_var + LOG_2PI).sum(-1)  # log q(h | x), (B, L)
         log_prior, _ = self.flow.log_prob(latent - self._origin(batch), control)  # (B,)
-        residual = (noisy_pose - self.decode(latent)) * torch.exp(-self.decoder_log_std)
-        log_likelihood = -0.5 * (residual.square() + LOG_2PI).sum(-1) - self.decoder_log_std.sum()
+        error = (noisy_pose - self.decode(latent)).square()
+        if self.training:
+            with torch.no_grad():
+                batch_variance = error.flatten(0, 1).mean(0)
+                self.decoder_variance.lerp_(batch_variance, self.variance_momentum)
+        variance = self.decoder_variance
+        log_likelihood = -0.5 * (error / variance + variance.log() + LOG_2PI).sum(-1)
         kl = (log_posterior.sum(1) - log_prior).mean() / length
         reconstruction = -log_likelihood.mean()
         return {
