@@ -60,13 +60,22 @@ def test_flow_speed_benchmark_runs():
     assert rows == ["MLP", "LSTM"], output
 
 
-def test_moglow_benchmark_measures_a_run_against_the_references(moglow_run):
-    output = run("bench_moglow.py", str(moglow_run), "--samples", "2")
+def test_generator_benchmark_measures_a_run_against_the_references(moglow_run):
+    output = run("bench_generators.py", str(moglow_run), "--samples", "2")
     for row in ("parameters", "training", "streaming, 1 sample", "streaming, 8 sample"):
         assert any(line.startswith(row) for line in output.splitlines()), output
-    systems = ("ground truth", "floor", "mismatched", "mean_pose", "MoGlow, T = 1")
+    systems = ("ground truth", "floor", "mismatched", "mean_pose", "moglow, T = 1")
     for system in systems:
         line = next(line for line in output.splitlines() if line.startswith(system))
         assert re.search(r"hellinger +\d\.\d{3} ± .*ratio .*lead ", line), line
-    refused = launch("bench_moglow.py", str(moglow_run / "missing"), "--samples", "0")
+    refused = launch("bench_generators.py", str(moglow_run / "missing"), "--samples", "0")
     assert refused.returncode == 2 and "--samples must be at least 1, got 0" in refused.stderr
+
+
+def test_flowvae_ablation_benchmark_reports_both_losses_over_seeds():
+    output = run("bench_flowvae_ablation.py", "--quick", "--seeds", "2")
+    for label in ("with d(h')", "without"):
+        assert re.search(rf"{re.escape(label)}: hellinger \S+ ± ", output), output
+    assert re.search(r"sample_mse [+-]\S+ \(\S+\)", output), output
+    refused = launch("bench_flowvae_ablation.py", "--seeds", "1")
+    assert refused.returncode == 2 and "--seeds must be at least 2" in refused.stderr

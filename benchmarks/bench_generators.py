@@ -1,6 +1,7 @@
-"""MoGlow on this machine: training speed, streaming speed, size, and its motion on held-out speech.
+"""The generative models on this machine: training and streaming speed, size, held-out motion.
 
-Measures a run folder that ``python -m gesturelib train moglow --out RUN`` wrote:
+Measures run folders that ``python -m gesturelib train MODEL --out RUN`` wrote, for any model
+that generates motion (``moglow``, ``flowvae``, ``flowvae_elbo``), one after the other:
 
 * training: frames per second (the training frames of all epochs over the training time the run
   recorded) and the training time itself;
@@ -17,8 +18,10 @@ Measures a run folder that ``python -m gesturelib train moglow --out RUN`` wrote
   the 15th, 50th and 85th percentile of the training values (the others at their median), and the
   rank correlation between requested and realised levels over conversations and samples.
 
-Usage (a missing run folder is trained first, with ``python -m gesturelib train moglow``):
-    .venv/bin/python benchmarks/bench_moglow.py [RUN] [--temperatures 1.0 0.8] [--samples 3]
+Usage (a missing run folder named after a model, e.g. ``runs/flowvae``, is trained first with
+``python -m gesturelib train``)::
+
+    .venv/bin/python benchmarks/bench_generators.py [RUN ...] [--temperatures 1.0 0.8] [--samples 3]
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ MEASURES = ("hellinger", "ratio", "lead")
 def training_speed(run: Path, checkpoint, splits) -> tuple[float, float]:
     """``(training seconds, training frames per second)`` of a run folder."""
     summary = json.loads((run / "run.json").read_text())
-    windows, _, _ = RECIPES["moglow"].settings(summary["quick"])
+    windows, _, _ = RECIPES[summary["model"]].settings(summary["quick"])
     datasets, _ = make_datasets({"train": splits["train"]}, windows)
     history = History.from_dict(checkpoint["history"])
     seconds = sum(history.epoch_seconds)
@@ -113,35 +116,22 @@ def style_control(model, normaliser, conversations, samples: int, temperature: f
     return correlations
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "run", type=Path, nargs="?", default=Path("runs/moglow"), help="a MoGlow run folder"
-    )
-    parser.add_argument("--temperatures", type=float, nargs="+", default=[1.0])
-    parser.add_argument("--samples", type=int, default=3, help="samples per conversation")
-    args = parser.parse_args()
-    if args.samples < 1:
-        parser.error(f"--samples must be at least 1, got {args.samples}")
-    if not (args.run / "best.pt").exists():
-        print(f"{args.run} holds no trained model: training one")
-        if cli.main(["train", "moglow", "--out", str(args.run)]) != 0:
-            raise SystemExit(2)
-    torch.set_num_threads(1)
-    model, normaliser, checkpoint = cli.load_run(args.run)
-    if type(model).__name__ != "MoGlow":
-        parser.error(f"{args.run} holds a {type(model).__name__}, not a MoGlow")
-    summary = json.loads((args.run / "run.json").read_text())
+def measure(run: Path, temperatures: list[float], samples: int) -> None:
+    """Print the figures of one run folder."""
+    model, normaliser, checkpoint = cli.load_run(run)
+    if not hasattr(model, "step"):
+        raise SystemExit(f"{run} holds a {type(model).__name__}, which does not generate motion")
+    summary = json.loads((run / "run.json").read_text())
     splits = load_dataset(summary["data"])
     test = splits["test"]
-    seconds, frames_per_second = training_speed(args.run, checkpoint, splits)
+    seconds, frames_per_second = training_speed(run, checkpoint, splits)
     parameters = sum(p.numel() for p in model.parameters())
-    print(f"run {args.run}: {json.dumps(checkpoint['model_config'])}")
+    print(f"run {run}: {summary['model']} {json.dumps(checkpoint['model_config'])}")
     print(f"parameters {parameters:,}")
     print(f"training {seconds / 60:.1f} min, {frames_per_second:,.0f} frames/s (one thread)")
-    for samples in (1, 8):
-        speed = streaming_speed(model, normaliser, test[0], samples)
-        print(f"streaming, {samples} sample(s) at once: {speed:.1f}x real time (one thread)")
+    for count in (1, 8):
+        speed = streaming_speed(model, normaliser, test[0], count)
+        print(f"streaming, {count} sample(s) at once: {speed:.1f}x real time (one thread)")
 
     test_s = sum(len(c.positions) for c in test) / 25
     print(f"\nheld-out: {len(test)} test conversations, {test_s:.0f} s in all")
@@ -153,16 +143,47 @@ def main() -> None:
         test, mean_pose, seed=1000, others=splits["val"]
     ).items():
         print(f"{name:22} {summarise([headline_measures(test, motions)])}")
-    for temperature in args.temperatures:
+    for temperature in temperatures:
         motions = generate_for(
-            test, model, normaliser, samples=args.samples, temperature=temperature, seed=0
+            test, model, normaliser, samples=samples, temperature=temperature, seed=0
         )
-        scores = [headline_measures(test, [m[k] for m in motions]) for k in range(args.samples)]
-        label = f"MoGlow, T = {temperature:g}"
-        print(f"{label:22} {summarise(scores)}   ({args.samples} samples)")
-    if model.config.style:
-        print(f"\nstyle control (T = {args.temperatures[0]:g}):")
-        style_control(model, normaliser, test, args.samples, args.temperatures[0])
+        scores = [headline_measures(test, [m[k] for m in motions]) for k in range(samples)]
+        label = f"{summary['model']}, T = {temperature:g}"
+        print(f"{label:22} {summarise(scores)}   ({samples} samples)")
+    if getattr(model.config, "style", False):
+        print(f"\nstyle control (T = {temperatures[0]:g}):")
+        style_control(model, normaliser, test, samples, temperatures[0])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "runs",
+        type=Path,
+        nargs="*",
+        default=[Path("runs/moglow"), Path("runs/flowvae")],
+        help="run folders (default: runs/moglow runs/flowvae)",
+    )
+    parser.add_argument("--temperatures", type=float, nargs="+", default=[1.0])
+    parser.add_argument("--samples", type=int, default=3, help="samples per conversation")
+    args = parser.parse_args()
+    if args.samples < 1:
+        parser.error(f"--samples must be at least 1, got {args.samples}")
+    for run in args.runs:
+        if (run / "best.pt").exists():
+            continue
+        if run.name not in RECIPES:
+            parser.error(
+                f"{run} holds no trained model; train one with `python -m gesturelib train`"
+            )
+        print(f"{run} holds no trained model: training a {run.name}")
+        if cli.main(["train", run.name, "--out", str(run)]) != 0:
+            raise SystemExit(2)
+    torch.set_num_threads(1)
+    for number, run in enumerate(args.runs):
+        if number:
+            print()
+        measure(run, args.temperatures, args.samples)
 
 
 if __name__ == "__main__":
