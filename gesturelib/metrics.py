@@ -11,8 +11,9 @@ one, so most measures compare *distributions* (Kucherenko et al. 2021; Taylor et
 * **Activity** (Taylor et al., Figures 6-8): :func:`distance_from_mean_pose`, and
   :func:`speaking_listening_statistics`, which splits it and its first derivative into the frames
   where the agent speaks and those where it listens (:func:`split_by_activity`).
-* **Timing**: :func:`lead_lag`, the lag that best aligns two series (e.g. wrist speed against
-  audio emphasis), by normalised cross-correlation.
+* **Timing**: :func:`lag_correlation`, the normalised cross-correlation of two series at every
+  lag, and :func:`lead_lag`, the lag that best aligns them (e.g. wrist speed against audio
+  emphasis).
 * **Order**: :func:`rank_correlation` (Spearman's), e.g. of a requested style against the one
   realised.
 * **Accuracy and features**: :func:`average_position_error` (APE) and :func:`frechet_distance`
@@ -348,31 +349,19 @@ def speaking_listening_statistics(
 # --------------------------------------------------------------------------- timing
 
 
-def lead_lag(reference, signal, fps, max_lag_s: float) -> float:
-    """How many seconds ``signal`` leads ``reference``, by normalised cross-correlation.
+def lag_correlation(reference, signal, fps, max_lag_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The normalised cross-correlation of two series at every lag up to ``max_lag_s``.
 
-    For each lag ``k`` frames in ``[-K, K]`` (``K = round(max_lag_s * fps)``) the Pearson
-    correlation of ``signal[t]`` with ``reference[t + k]`` is computed over the frames where both
-    exist; the best lag is refined to a fraction of a frame by fitting a parabola through the
-    correlation peak and its two neighbours (vertex at ``(c[k-1] - c[k+1]) / (2 (c[k-1] - 2 c[k]
-    + c[k+1]))`` frames from ``k``). For a shift of smooth peaks 1-5 frames wide, the error of
-    this refinement is a few hundredths of a frame.
-
-    Sign: POSITIVE when ``signal`` LEADS. Example at 25 fps: if audio emphasis (``reference``)
-    peaks at frame 50 and wrist speed (``signal``) at frame 48, the wrist leads by 2 frames and
-    the result is ``+0.08`` s; ``signal[t] == reference[t + 2]``.
+    For each lag ``k`` frames in ``[-K, K]`` (``K = round(max_lag_s * fps)``): the Pearson
+    correlation of ``signal[t]`` with ``reference[t + k]`` over the frames where both exist.
+    Positive lags are those where ``signal`` LEADS (see :func:`lead_lag`).
 
     Args:
-        reference, signal: ``(T,)`` series on the same frames (align them first).
+        reference, signal: ``(T,)`` series on the same frames (align them first), not constant.
         fps: frames per second.
-        max_lag_s: largest lag searched, in seconds; at least one frame and less than ``T - 2``.
+        max_lag_s: largest lag, in seconds; at least one frame and less than ``T - 2``.
     Returns:
-        The lag in seconds. If the peak lies at the edge of the search range a warning says the
-        true lag may lie beyond it.
-
-    Choose ``max_lag_s`` well beyond the lag you expect: for rhythmic signals (accents every few
-    syllables) the correlation has side peaks, so a true lag outside the range shows up as one of
-    those side peaks *inside* it, and no warning can tell.
+        ``(lags (2K + 1,) in seconds, correlations (2K + 1,))``.
     """
     fps = _check_fps(fps)
     reference, signal = _as_array(reference, "reference"), _as_array(signal, "signal")
@@ -391,9 +380,33 @@ def lead_lag(reference, signal, fps, max_lag_s: float) -> float:
     for name, series in (("reference", reference), ("signal", signal)):
         if np.ptp(series) == 0:
             raise ValueError(f"{name} is constant: its correlation with anything is undefined")
-
     lags = np.arange(-max_lag, max_lag + 1)
-    correlation = np.array([_pearson(signal, reference, lag) for lag in lags])
+    return lags / fps, np.array([_pearson(signal, reference, lag) for lag in lags])
+
+
+def lead_lag(reference, signal, fps, max_lag_s: float) -> float:
+    """How many seconds ``signal`` leads ``reference``: the peak of :func:`lag_correlation`.
+
+    The best lag is refined to a fraction of a frame by fitting a parabola through the
+    correlation peak and its two neighbours (vertex at ``(c[k-1] - c[k+1]) / (2 (c[k-1] - 2 c[k]
+    + c[k+1]))`` frames from ``k``). For a shift of smooth peaks 1-5 frames wide, the error of
+    this refinement is a few hundredths of a frame.
+
+    Sign: POSITIVE when ``signal`` LEADS. Example at 25 fps: if audio emphasis (``reference``)
+    peaks at frame 50 and wrist speed (``signal``) at frame 48, the wrist leads by 2 frames and
+    the result is ``+0.08`` s; ``signal[t] == reference[t + 2]``.
+
+    Args:
+        reference, signal, fps, max_lag_s: as :func:`lag_correlation`.
+    Returns:
+        The lag in seconds. If the peak lies at the edge of the search range a warning says the
+        true lag may lie beyond it.
+
+    Choose ``max_lag_s`` well beyond the lag you expect: for rhythmic signals (accents every few
+    syllables) the correlation has side peaks, so a true lag outside the range shows up as one of
+    those side peaks *inside* it, and no warning can tell.
+    """
+    lags, correlation = lag_correlation(reference, signal, fps, max_lag_s)
     best = int(np.argmax(correlation))
     if best in (0, len(lags) - 1):
         warnings.warn(
@@ -401,11 +414,11 @@ def lead_lag(reference, signal, fps, max_lag_s: float) -> float:
             "the true lag may be larger: increase max_lag_s",
             stacklevel=2,
         )
-        return lags[best] / fps
+        return float(lags[best])
     before, peak, after = correlation[best - 1 : best + 2]
     curvature = before - 2.0 * peak + after
     offset = 0.5 * (before - after) / curvature if curvature < 0 else 0.0
-    return (lags[best] + offset) / fps
+    return float(lags[best] + offset / _check_fps(fps))
 
 
 def _pearson(signal: np.ndarray, reference: np.ndarray, lag: int) -> float:

@@ -16,6 +16,7 @@ from gesturelib.metrics import (
     frechet_distance,
     hellinger_distance,
     jerk,
+    lag_correlation,
     lead_lag,
     motion_statistics,
     speaking_listening_statistics,
@@ -237,6 +238,17 @@ def test_lead_lag_recovers_integer_shift_of_a_spike_train(shift_frames):
     fps = 25
     measured_frames = lead_lag(reference, signal, fps, max_lag_s=0.5) * fps
     assert measured_frames == pytest.approx(shift_frames, abs=0.01)
+
+
+def test_lag_correlation_is_one_at_the_shift_of_a_spike_train_and_small_elsewhere():
+    rng = np.random.default_rng(4)
+    reference = (rng.random(400) < 0.05).astype(float)
+    signal = np.zeros_like(reference)
+    signal[:-3] = reference[3:]  # leads by 3 frames
+    lags, correlation = lag_correlation(reference, signal, fps=25, max_lag_s=0.4)
+    np.testing.assert_allclose(lags, np.arange(-10, 11) / 25)
+    assert correlation[lags.tolist().index(3 / 25)] == pytest.approx(1.0, abs=0.01)
+    assert np.delete(correlation, lags.tolist().index(3 / 25)).max() < 0.3
 
 
 @pytest.mark.parametrize("lead_frames", [2.4, -1.7, 0.5])
