@@ -79,7 +79,7 @@ class History:
         Args:
             keys: which scalars to show; all by default.
         Returns:
-            The matplotlib figure. The dotted line marks the best epoch.
+            The matplotlib figure. The dotted line marks the best epoch, whose weights are kept.
         """
         import matplotlib.pyplot as plt  # here: importing pyplot is slow, and only plots need it
         from matplotlib.ticker import MaxNLocator
@@ -89,6 +89,13 @@ class History:
         fig, axes = plt.subplots(
             1, len(keys) + 1, figsize=(3.6 * (len(keys) + 1), 3), squeeze=False
         )
+        for ax in axes[0]:
+            ax.set_xlabel("epoch")
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+            if self.best_epoch is not None:
+                ax.axvline(
+                    self.best_epoch, color="k", linestyle=":", linewidth=1, label="best (kept)"
+                )
         for ax, key in zip(axes[0, :-1], keys, strict=True):
             ax.plot(epochs, self.train[key], label="training")
             if key in self.val:
@@ -97,10 +104,5 @@ class History:
             ax.legend()
         axes[0, -1].plot(epochs, self.learning_rate, color="grey")
         axes[0, -1].set_title("learning rate")
-        for ax in axes[0]:
-            ax.set_xlabel("epoch")
-            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-            if self.best_epoch is not None:
-                ax.axvline(self.best_epoch, color="k", linestyle=":", linewidth=1)
         fig.tight_layout()
         return fig
