@@ -55,7 +55,11 @@ def build(config, normaliser, batch, seed=0, perturb=True):
     """A model whose flow has seen ``batch`` (ActNorm initialised); with ``perturb`` every weight
     is moved at random, so that no coupling is an identity."""
     torch.manual_seed(seed)
-    model = type_of(config)(config, normaliser)
+    model = (
+        FlowVAE(config)
+        if isinstance(config, FlowVAEConfig)
+        else VariationalFlowVAE(config, normaliser)
+    )
     model.loss(batch)
     if perturb:
         generator = torch.Generator().manual_seed(seed)
@@ -63,10 +67,6 @@ def build(config, normaliser, batch, seed=0, perturb=True):
             for parameter in model.parameters():
                 parameter.add_(0.2 * torch.randn(parameter.shape, generator=generator))
     return model.eval()
-
-
-def type_of(config):
-    return FlowVAE if isinstance(config, FlowVAEConfig) else VariationalFlowVAE
 
 
 def identity_flow(model):

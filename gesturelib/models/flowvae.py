@@ -245,7 +245,7 @@ class FlowVAE(_LatentFlowModel):
 
     config_class = FlowVAEConfig
 
-    def __init__(self, config: FlowVAEConfig, normaliser=None):
+    def __init__(self, config: FlowVAEConfig):
         super().__init__(config)
         self.encoder = mlp([POSE_DIM, config.autoencoder_hidden, config.latent_dim])
 
