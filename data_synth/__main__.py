@@ -9,7 +9,6 @@ Without ``--quick`` the size follows ``GESTURELIB_QUICK`` (set in CI), like the 
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -21,12 +20,13 @@ from data_synth.dataset import (
     QUICK_MINUTES,
     write_dataset,
 )
+from gesturelib.cli import OneLineParser
 from gesturelib.runtime import quick_mode
 
 
 def main(argv: list[str] | None = None) -> int:
     """Parse the arguments, write the dataset, print a summary; return the exit status."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m data_synth",
         description="Generate the synthetic dyadic conversation dataset (train/val/test).",
     )
@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
             overwrite=args.overwrite,
             progress=not args.no_progress,
         )
-    except (FileExistsError, FileNotFoundError, ValueError) as error:
+    except (OSError, ValueError) as error:
         print(f"python -m data_synth: error: {error}", file=sys.stderr)
         return 2
     print(

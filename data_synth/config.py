@@ -185,7 +185,7 @@ class VoiceConfig:
         accent_spacing_syllables: syllables from one accent to the next (integers >= 2).
         emphasis_range: emphasis of an accent, in (0, 1]; the last accent of a phrase (the
             nuclear accent) gets the upper half of the range.
-        accent_gain_db: extra loudness of an accented vowel at emphasis 1.
+        accent_gain_db: extra loudness of an accented vowel at emphasis 1, 0 to 40 dB.
         accent_lengthening: duration factor of an accented syllable (>= 1).
         accent_pitch_semitones: height of the pitch peak on an accent at emphasis 1.
         final_lengthening: duration factor of a phrase's last syllable (>= 1).
@@ -223,7 +223,7 @@ class VoiceConfig:
         _check_range(self, "syllable_rate_hz", 0.0, low_open=True)
         _check_range(self, "accent_spacing_syllables", 2, integer=True)
         _check_range(self, "emphasis_range", 0.0, 1.0, low_open=True)
-        _non_negative(self, "accent_gain_db")
+        _check_number(self, "accent_gain_db", 0.0, 40.0)
         _check_number(self, "accent_lengthening", 1.0)
         _non_negative(self, "accent_pitch_semitones")
         _check_number(self, "final_lengthening", 1.0)
@@ -334,8 +334,9 @@ class ConversationConfig:
 
     Attributes:
         turns, voice, motion, style: the parts above.
-        sample_rate: audio samples per second (at least 16 kHz: the fricatives reach 7.5 kHz).
-        fps: motion frames per second.
+        sample_rate: audio samples per second, 16 to 96 kHz (16 kHz at least: the fricatives
+            reach 7.5 kHz).
+        fps: motion frames per second, 1 to 240.
     """
 
     turns: TurnConfig = field(default_factory=TurnConfig)
@@ -357,8 +358,8 @@ class ConversationConfig:
                     f"ConversationConfig.{name} must be a {kind.__name__}, "
                     f"got {type(getattr(self, name)).__name__}"
                 )
-        _check_number(self, "sample_rate", 16000, integer=True)
-        _check_number(self, "fps", 1, integer=True)
+        _check_number(self, "sample_rate", 16000, 96000, integer=True)
+        _check_number(self, "fps", 1, 240, integer=True)
         shortest_phrase = self.turns.a_phrase_s[0]
         if self.motion.stroke_lead_s >= shortest_phrase:
             raise ConfigError(

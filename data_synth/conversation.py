@@ -166,6 +166,11 @@ def generate_conversation(
         for s in ("A", "B")
     ]
     audio = mix(tracks, config.voice, audio_rng)
+    if not np.isfinite(audio).all():
+        raise ConfigError(
+            f"the voices of {config.voice} gave audio with NaN or infinite samples; bring the "
+            "levels and gains back towards the defaults"
+        )
     n_frames = num_frames(n_samples, config.sample_rate, config.fps)
     speech_events = Events(
         phrases=utterances,

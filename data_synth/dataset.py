@@ -140,9 +140,10 @@ def write_dataset(
     if overwrite and manifest_path.exists():
         _remove_old_dataset(out_dir, manifest_path, set(planned))
 
+    for folder in sorted({stem.parent for _, _, stem in plan}):  # before any work: can we write?
+        folder.mkdir(parents=True, exist_ok=True)
     splits: dict[str, list[dict]] = {split: [] for split in SPLITS}
     for split, index, stem in tqdm(plan, desc="conversations", disable=not progress):
-        stem.parent.mkdir(parents=True, exist_ok=True)
         conversation = generate_conversation(conversation_s, conversation_seed(seed, index), config)
         save_conversation(conversation, stem, overwrite=overwrite)
         splits[split].append(

@@ -48,12 +48,13 @@ def occlusion_mask(num_frames: int, fps: int, seed: int, rate_scale: float = 1.0
         num_frames: ``T``.
         fps: frames per second.
         seed: draws the gaps.
-        rate_scale: multiplies every rate of :data:`LOSS_RATE_PER_S` (0: nothing is lost).
+        rate_scale: multiplies every rate of :data:`LOSS_RATE_PER_S`, 0 (nothing is lost) to
+            100.
     """
     num_frames = check_value(num_frames, "num_frames", 1, integer=True)
     fps = check_value(fps, "fps", 1, integer=True)
     seed = check_value(seed, "seed (a non-negative integer)", 0, integer=True)
-    rate_scale = check_value(rate_scale, "rate_scale", 0.0)
+    rate_scale = check_value(rate_scale, "rate_scale", 0.0, 100.0)
     rng = np.random.default_rng([seed, 0x0CC1])
     visible = np.ones((num_frames, len(KEYPOINTS)), dtype=bool)
     seconds = num_frames / fps
@@ -70,10 +71,19 @@ def occlude(conversation, seed: int, rate_scale: float = 1.0):
     """A copy of ``conversation`` whose agent a tracker saw with gaps (module docstring).
 
     Returns:
-        The conversation with ``visible (T, 9)`` set, the T-pose's rotation at every hidden limb
-        and positions recomputed from the rotations; audio, activity and events unchanged.
+        The conversation with ``visible (T, 9)`` set (limbs it had lost already stay lost), the
+        T-pose's rotation at every hidden limb and positions recomputed from the rotations;
+        audio, activity and events unchanged.
     """
+    for name in ("num_frames", "fps", "rotations", "positions"):
+        if not hasattr(conversation, name):
+            raise TypeError(
+                f"occlude needs a data_synth.Conversation; a {type(conversation).__name__} has no "
+                f"{name}"
+            )
     visible = occlusion_mask(conversation.num_frames, conversation.fps, seed, rate_scale)
+    if getattr(conversation, "visible", None) is not None:
+        visible &= conversation.visible
     rotations = np.where(visible[..., None], conversation.rotations, T_POSE_ROTATION)
     rotations = rotations.astype(conversation.rotations.dtype)
     positions = forward_kinematics(rotations).astype(conversation.positions.dtype)

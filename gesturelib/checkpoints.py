@@ -78,7 +78,7 @@ def save_checkpoint(contents: dict, path: str | Path) -> None:
     except BaseException as error:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(temporary)
-        if isinstance(error, OSError) and error.errno == errno.ENOSPC:
+        if _out_of_space(error):
             raise CheckpointError(
                 f"no space left on the device to write {path}; the previous file is intact. "
                 "Free some space and run the same command again to continue."
@@ -90,6 +90,16 @@ def save_checkpoint(contents: dict, path: str | Path) -> None:
             os.fsync(folder)
         finally:
             os.close(folder)
+
+
+def _out_of_space(error: BaseException) -> bool:
+    """Whether ``error`` or an error it was raised from is "no space left on the device" (torch
+    reports a full disk as a ``RuntimeError`` raised while handling the ``OSError``)."""
+    while error is not None:
+        if isinstance(error, OSError) and error.errno == errno.ENOSPC:
+            return True
+        error = error.__cause__ or error.__context__
+    return False
 
 
 def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
@@ -233,7 +243,9 @@ class RunFolder:
             elif stored != wanted:
                 problems.append(f"{_LABELS[key]}: the file has {stored!r}, expected {wanted!r}")
         if problems:
-            advice = advice or "Pass overwrite=True to replace it, or use another folder."
+            advice = advice or (
+                "Replace it (overwrite=True; --overwrite on the command line), or use another folder."
+            )
             raise CheckpointMismatchError(
                 f"{path} belongs to a different run:\n  " + "\n  ".join(problems) + f"\n{advice}"
             )
@@ -263,38 +275,43 @@ def set_rng_state(state: dict, model: nn.Module) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-def dataset_fingerprint(*datasets, samples: int = 5) -> str:
-    """A short hash identifying datasets (or None) by their sizes and a few evenly spaced items.
+def dataset_fingerprint(*datasets) -> str:
+    """A short hash of datasets (or None) that changes when any of their data does.
 
-    Cheap (reads ``samples`` items of each) and enough to tell apart the splits, window configs
-    and normalisations of the course's data; pass your own fingerprint where it is not.
+    A dataset with a ``fingerprint()`` method (:class:`gesturelib.data.WindowDataset`: its arrays
+    and window config) is hashed by it; any other is hashed item by item, every item, so that a
+    change anywhere in it gives another fingerprint. For a large dataset of your own, give it a
+    ``fingerprint()`` method or pass ``data_fingerprint`` to the training functions.
     """
     hasher = hashlib.sha256()
     for data in datasets:
         if data is None:
             hasher.update(b"none")
-            continue
-        hasher.update(f"len={len(data)}".encode())
-        for index in sorted({int(i) for i in np.linspace(0, len(data) - 1, samples)}):
-            _hash_value(hasher, data[index])
+        elif callable(getattr(data, "fingerprint", None)):
+            hasher.update(f"dataset {data.fingerprint()}".encode())
+        else:
+            hasher.update(f"len={len(data)}".encode())
+            for index in range(len(data)):
+                hash_value(hasher, data[index])
     return hasher.hexdigest()[:16]
 
 
 def state_fingerprint(model: nn.Module) -> str:
     """A short hash of a model's weights and buffers (names, shapes, dtypes and values)."""
     hasher = hashlib.sha256()
-    _hash_value(hasher, dict(model.state_dict()))
+    hash_value(hasher, dict(model.state_dict()))
     return hasher.hexdigest()[:16]
 
 
-def _hash_value(hasher, value) -> None:
+def hash_value(hasher, value) -> None:
+    """Feed ``value`` (dicts, lists, tensors, arrays, plain values) into a hashlib ``hasher``."""
     if isinstance(value, dict):
         for key in sorted(value):
             hasher.update(f"<{key}>".encode())
-            _hash_value(hasher, value[key])
+            hash_value(hasher, value[key])
     elif isinstance(value, list | tuple):
         for item in value:
-            _hash_value(hasher, item)
+            hash_value(hasher, item)
     elif isinstance(value, torch.Tensor | np.ndarray):
         array = value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else value
         array = np.ascontiguousarray(array)

@@ -30,6 +30,14 @@ class CommandError(Exception):
     """A problem the user can fix; reported as one line, without a traceback."""
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line on stderr (and exit status 2),
+    like every other error a user can fix; ``--help`` shows the usage."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def _output_folder(out: Path, overwrite: bool, command: str) -> None:
     """Make ``out`` ready for ``command``'s files; refuse one holding files it did not write."""
     if out.exists() and not out.is_dir():
@@ -151,6 +159,12 @@ def load_run(folder: Path, device: str = "cpu"):
     from gesturelib.checkpoints import load_model, read_checkpoint
     from gesturelib.data import Normaliser
     from gesturelib.recipes import MODEL_CLASSES
+    from gesturelib.runtime import device as checked_device
+
+    try:
+        device = checked_device(device)
+    except ValueError as error:
+        raise CommandError(str(error)) from None
 
     path = Path(folder) / "best.pt"
     if not Path(folder).is_dir():
@@ -184,7 +198,13 @@ def run_generate(args) -> list[Path]:
         audio, sample_rate = load_audio(args.audio)
         if num_frames(len(audio), sample_rate, FPS) < 1:
             raise CommandError(f"{args.audio} is shorter than one frame ({1000 // FPS} ms)")
-        activity = np.where(voice_activity(audio, sample_rate), Activity.A_SPEAKS, Activity.NONE)
+        speaking = voice_activity(audio, sample_rate)
+        if not speaking.any():
+            raise CommandError(
+                f"{args.audio} holds no speech (silent, or too quiet to tell from silence): "
+                "the agent would only rest; give a recording of speech"
+            )
+        activity = np.where(speaking, Activity.A_SPEAKS, Activity.NONE)
     else:
         conversation = load_conversation(args.conversation)  # its motion is never read
         audio, sample_rate, activity = (
@@ -333,23 +353,40 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
 # ---------------------------------------------------------------------------------------------
 
 
+def _at_least(minimum: int):
+    """An argparse type: an integer >= ``minimum`` (argparse names the option in its error)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    return parse
+
+
 def _parser() -> argparse.ArgumentParser:
     from gesturelib.recipes import RECIPES
 
-    parser = argparse.ArgumentParser(prog="gesturelib", description=__doc__.splitlines()[0])
-    commands = parser.add_subparsers(dest="command", required=True)
+    parser = OneLineParser(prog="gesturelib", description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     train = commands.add_parser("train", help="train a model into a run folder")
     train.add_argument("model", choices=sorted(RECIPES), help="which model")
     train.add_argument("--out", required=True, type=Path, help="the run folder")
     train.add_argument("--quick", action="store_true", help="quick configs and quick data")
     train.add_argument("--data", type=Path, help="a dataset folder (default: the synthetic one)")
-    train.add_argument("--seed", type=int, default=0, help="seeds the weights and the training")
+    train.add_argument(
+        "--seed", type=_at_least(0), default=0, help="seeds the weights and the training"
+    )
     again = train.add_mutually_exclusive_group()
     again.add_argument("--resume", action="store_true", help="continue the run in --out")
     again.add_argument("--overwrite", action="store_true", help="replace the run in --out")
     train.add_argument("--device", default="cpu", help="cpu or cuda")
-    train.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    train.add_argument("--threads", type=_at_least(1), default=1, help="torch threads (default 1)")
 
     generate = commands.add_parser("generate", help="the agent's motion for a recording")
     generate.add_argument("run", type=Path, help="a run folder")
@@ -357,9 +394,11 @@ def _parser() -> argparse.ArgumentParser:
     source.add_argument("--audio", type=Path, help="a recording of the agent's speech")
     source.add_argument("--conversation", type=Path, help="a conversation's path stem")
     generate.add_argument("--out", required=True, type=Path, help="the output folder")
-    generate.add_argument("--seed", type=int, default=0)
+    generate.add_argument("--seed", type=_at_least(0), default=0)
     generate.add_argument("--temperature", type=float, help="default: the model's own")
-    generate.add_argument("--samples", type=int, default=1, help="how many motions to draw")
+    generate.add_argument(
+        "--samples", type=_at_least(1), default=1, help="how many motions to draw"
+    )
     generate.add_argument(
         "--style", nargs="+", metavar="NAME=PERCENTILE", help="e.g. hand_height=85"
     )
@@ -375,7 +414,7 @@ def _parser() -> argparse.ArgumentParser:
     demo = commands.add_parser("demo", help="render a synthetic conversation into a folder")
     demo.add_argument("--out", type=Path, default=Path("outputs/demo"), help="output folder")
     demo.add_argument("--seconds", type=float, default=20.0, help="length of the conversation")
-    demo.add_argument("--seed", type=int, default=0, help="seed of the conversation")
+    demo.add_argument("--seed", type=_at_least(0), default=0, help="seed of the conversation")
     demo.add_argument(
         "--overwrite", action="store_true", help="write into a folder of others' files"
     )

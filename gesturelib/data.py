@@ -37,6 +37,7 @@ is not a list of features; past that, the windowing trusts its inputs.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Mapping, Sequence
@@ -460,6 +461,15 @@ class WindowDataset(Dataset):
                 f"no conversation is long enough for one window: each needs at least "
                 f"{config.frames_needed} frames ({config.frames_needed / FPS:.1f} s)"
             )
+
+    def fingerprint(self) -> str:
+        """A short hash of everything the items are cut from: the window config, the windows'
+        positions and the normalised arrays of every conversation."""
+        from gesturelib.checkpoints import hash_value
+
+        hasher = hashlib.sha256()
+        hash_value(hasher, [asdict(self.config), self._index, self._streams])
+        return hasher.hexdigest()[:16]
 
     def __len__(self) -> int:
         return len(self._index)

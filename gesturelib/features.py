@@ -204,7 +204,12 @@ def save_audio(
         raise IsADirectoryError(f"cannot write {path}: it is a folder")
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} already exists; pass overwrite=True to replace it")
-    soundfile.write(path, np.clip(audio, -1.0, 1.0), sample_rate, subtype="PCM_16", format="WAV")
+    try:
+        soundfile.write(
+            path, np.clip(audio, -1.0, 1.0), sample_rate, subtype="PCM_16", format="WAV"
+        )
+    except soundfile.SoundFileError as error:  # libsndfile says "System error." for a full disk
+        raise OSError(f"cannot write {path}: {error} (is the disk full, or read-only?)") from error
 
 
 # --------------------------------------------------------------------------- frame alignment

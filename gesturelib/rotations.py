@@ -304,7 +304,15 @@ def axis_angle_to_matrix(axis, angle):
     """
     check_trailing_shape(axis, (3,), "axis")
     angle = torch.as_tensor(angle, dtype=axis.dtype, device=axis.device)
-    axis, _ = torch.broadcast_tensors(axis, angle[..., None])
+    if not bool(torch.isfinite(angle).all()):
+        raise RotationError("angle holds NaN or infinite values: no rotation has such an angle")
+    try:
+        axis, _ = torch.broadcast_tensors(axis, angle[..., None])
+    except RuntimeError:
+        raise ValueError(
+            f"angle {tuple(angle.shape)} must broadcast against axis[..., 0] "
+            f"{tuple(axis.shape[:-1])}"
+        ) from None
     angle = angle.expand(axis.shape[:-1])
     k = axis / _direction_norm(axis, "axis")
     skew = _skew(k)

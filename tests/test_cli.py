@@ -239,3 +239,45 @@ def test_the_flowvaes_train_generate_and_describe_themselves(model, tiny_data, t
         motions.append(np.load(folder / "motion.npz")["rotations"])
     assert motions[0].shape == (samples * 25 // 16_000, 9, 6)
     np.testing.assert_array_equal(*motions)
+
+
+def test_usage_mistakes_are_one_line_naming_the_option(moglow_run, tmp_path, capsys):
+    write_wav(tmp_path / "speech.wav")
+    generate = ["generate", str(moglow_run), "--audio", str(tmp_path / "speech.wav")]
+    for args, message in [
+        (
+            ["train", "moglow", "--out", str(tmp_path / "r"), "--threads", "0"],
+            "--threads: must be at least 1",
+        ),
+        ([*generate, "--out", str(tmp_path / "o"), "--seed", "-1"], "--seed: must be at least 0"),
+        (
+            [*generate, "--out", str(tmp_path / "o"), "--samples", "0"],
+            "--samples: must be at least 1",
+        ),
+    ]:
+        with pytest.raises(SystemExit) as exit_status:
+            main(args)
+        assert exit_status.value.code == 2
+        error = capsys.readouterr().err
+        assert message in error and error.count("\n") == 1, error
+
+
+@pytest.mark.skipif(
+    __import__("torch").cuda.is_available(), reason="needs a machine without a CUDA GPU"
+)
+def test_generate_on_a_missing_gpu_says_so_in_one_line(moglow_run, tmp_path, capsys):
+    write_wav(tmp_path / "speech.wav")
+    args = ["generate", str(moglow_run), "--audio", str(tmp_path / "speech.wav")]
+    assert main([*args, "--out", str(tmp_path / "o"), "--device", "cuda"]) == 2
+    error = capsys.readouterr().err
+    assert "no CUDA GPU is available here" in error and error.count("\n") == 1
+
+
+def test_generate_refuses_a_recording_without_speech(moglow_run, tmp_path, capsys):
+    from gesturelib.features import save_audio
+
+    save_audio(tmp_path / "silence.wav", np.zeros(16_000, dtype=np.float32), 16_000)
+    args = ["generate", str(moglow_run), "--audio", str(tmp_path / "silence.wav")]
+    assert main([*args, "--out", str(tmp_path / "o")]) == 2
+    error = capsys.readouterr().err
+    assert "holds no speech" in error and error.count("\n") == 1

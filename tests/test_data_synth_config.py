@@ -241,3 +241,16 @@ def test_emphasis_envelope_peaks_where_a_sound_starts():
     # the change from frame 24 (0.96-1.00 s, silent) to frame 25 (1.00-1.04 s, sounding).
     assert np.argmax(envelope) == 24
     assert envelope.max() == 1.0 and envelope.min() >= 0.0
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: ConversationConfig(sample_rate=10**9), r"sample_rate.*\[16000, 96000\]"),
+        (lambda: ConversationConfig(fps=10**4), r"fps.*\[1, 240\]"),
+        (lambda: VoiceConfig(accent_gain_db=1e4), r"accent_gain_db.*\[0.0, 40.0\]"),
+    ],
+)
+def test_sizes_and_gains_beyond_any_use_are_refused(make, message):
+    with pytest.raises(ConfigError, match=message):
+        make()

@@ -397,3 +397,12 @@ def test_dataset_seeds_never_collide_with_the_small_seeds_of_demos():
         >= SEED_STRIDE
     )
     assert len({conversation_seed(seed, index) for seed in range(3) for index in range(30)}) == 90
+
+
+def test_the_command_line_says_in_one_line_when_it_cannot_write(tmp_path, capsys):
+    blocker = tmp_path / "notes.txt"
+    blocker.write_text("a file where a folder would be needed")
+    assert main(["--out", str(blocker / "dataset"), "--quick"]) == 2
+    error = capsys.readouterr().err
+    assert "error:" in error and error.count("\n") == 1
+    assert blocker.read_text() == "a file where a folder would be needed"

@@ -68,3 +68,21 @@ def test_the_mask_travels_with_the_files_and_a_damaged_one_is_named(conversation
 def test_training_features_refuse_motion_with_gaps(conversation):
     with pytest.raises(ValueError, match="fill the gaps first"):
         ConversationFeatures.from_conversation(occlude(conversation, seed=0, rate_scale=3.0))
+
+
+def test_occluding_twice_keeps_the_first_gaps_and_bad_arguments_are_named(conversation):
+    once = occlude(conversation, seed=0)
+    twice = occlude(once, seed=1)
+    assert not (twice.visible & ~once.visible).any()  # what was lost stays lost
+    assert (~twice.visible).sum() > (~once.visible).sum()
+    with pytest.raises(TypeError, match="occlude needs a data_synth.Conversation"):
+        occlude({"rotations": conversation.rotations}, seed=0)
+    for arguments, name in [
+        ((0, 25, 0), "num_frames"),
+        ((10, 0, 0), "fps"),
+        ((10, 25, -1), "seed"),
+    ]:
+        with pytest.raises(ConfigError, match=name):
+            occlusion_mask(*arguments)
+    with pytest.raises(ConfigError, match="rate_scale"):
+        occlusion_mask(10, 25, 0, rate_scale=1e8)

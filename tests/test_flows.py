@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import math
 
+import numpy as np
 import pytest
 import scipy.stats
 import torch
@@ -536,8 +537,28 @@ def test_bad_construction_raises_clear_errors():
         recurrent_glow(4, 2, 8, coupling="spline")
     with pytest.raises(ValueError, match="df"):
         glow(4, 2, 8, df=-1.0)
-    with pytest.raises(ValueError, match="steps must be at least 1"):
+    with pytest.raises(ValueError, match="steps must be an integer >= 1"):
         glow(4, 0, 8)
+    with pytest.raises(ValueError, match="cond_dim must be an integer >= 0"):
+        glow(4, 2, 8, cond_dim=-1)
+    with pytest.raises(ValueError, match="hidden must be an integer >= 1"):
+        recurrent_glow(4, 2, 0)
+
+
+def test_sample_counts_must_be_positive_integers_and_states_fit_their_batch():
+    flow = glow(4, 2, 8)
+    flow.log_prob(torch.randn(16, 4))  # ActNorm sees data
+    assert flow.sample(np.int64(5)).shape == (5, 4)  # a NumPy integer is a count too
+    for bad in (-1, 0, 5.0, (2, -3)):
+        with pytest.raises(ValueError, match="positive count"):
+            flow.sample(bad)
+    recurrent = recurrent_glow(4, 2, 8, cond_dim=3)
+    x, cond = torch.randn(2, 5, 4), torch.randn(2, 5, 3)
+    _, _, state = recurrent(x, cond)
+    with pytest.raises(ValueError, match="the state is of 2 sequences but x of 3"):
+        recurrent(torch.randn(3, 5, 4), torch.randn(3, 5, 3), state)
+    with pytest.raises(ValueError, match="the state is of 3 sequences but z of 2"):
+        recurrent.inverse(x, cond, recurrent.initial_state(3))
 
 
 # --------------------------------------------------------------------------- toy densities

@@ -253,6 +253,21 @@ def test_bad_configs_get_named_errors(changes, message):
         FlowVAEConfig(**changes)
 
 
+def test_a_model_refuses_a_config_of_another_model():
+    with pytest.raises(ValueError, match="pose_noise must be a finite number >= 0"):
+        VariationalFlowVAEConfig(pose_noise=-0.1)
+    with pytest.raises(
+        TypeError, match="FlowVAE needs a FlowVAEConfig, got VariationalFlowVAEConfig"
+    ):
+        FlowVAE(ELBO)
+    with pytest.raises(
+        TypeError, match="VariationalFlowVAE needs a VariationalFlowVAEConfig, got dict"
+    ):
+        VariationalFlowVAE({"latent_dim": 8})
+    with pytest.raises(TypeError, match="MoGlow needs a MoGlowConfig, got FlowVAEConfig"):
+        MoGlow(PAPER)
+
+
 def test_latent_scale_is_the_geometric_mean_spread_along_the_principal_axes():
     generator = torch.Generator().manual_seed(0)
     white = torch.randn(20_000, 3, generator=generator, dtype=torch.float64)

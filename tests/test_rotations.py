@@ -205,3 +205,12 @@ def test_zero_directions_are_refused():
         shortest_arc(np.ones(3), np.array([[1.0, 0, 0], [0, 0, 0]]))
     with pytest.raises(RotationError, match="axis is a zero vector"):
         axis_angle_to_matrix(np.zeros(3), 0.5)
+
+
+def test_axis_angle_refuses_angles_that_are_no_angle_and_shapes_that_do_not_fit():
+    with pytest.raises(RotationError, match="NaN or infinite"):
+        axis_angle_to_matrix([0.0, 0.0, 1.0], float("nan"))
+    with pytest.raises(
+        ValueError, match=r"angle \(3,\) must broadcast against axis\[..., 0\] \(4,\)"
+    ):
+        axis_angle_to_matrix(np.ones((4, 3)), np.ones(3))

@@ -474,11 +474,13 @@ def test_mismatched_checkpoints_are_refused_with_the_difference(tmp_path):
 
 def test_a_finished_run_is_not_reused_for_other_data(tmp_path):
     train(make_model(), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
-    other = toy_data(64, seed=9)
-    with pytest.raises(
-        CheckpointMismatchError, match=r"(?s)training data: the file has .*overwrite"
-    ):
-        train(make_model(), other, VAL, config(epochs=1), tmp_path, progress=False)
+    other = list(TRAIN)
+    other[len(other) // 3] = {key: value + 1 for key, value in other[len(other) // 3].items()}
+    for data in (toy_data(64, seed=9), other):  # other data, or one item changed anywhere
+        with pytest.raises(
+            CheckpointMismatchError, match=r"(?s)training data: the file has .*overwrite"
+        ):
+            train(make_model(), data, VAL, config(epochs=1), tmp_path, progress=False)
 
 
 def test_a_checkpoint_folder_that_is_a_file_is_refused(tmp_path):
@@ -489,12 +491,22 @@ def test_a_checkpoint_folder_that_is_a_file_is_refused(tmp_path):
     assert path.read_text() == "notes"
 
 
-def test_a_full_disk_is_named_and_leaves_the_checkpoints_intact(tmp_path, monkeypatch):
+def _os_full_disk(contents, file):
+    raise OSError(28, "No space left on device")
+
+
+def _torch_full_disk(contents, file):
+    """What torch.save raises on a full disk: its own error, raised while handling the OSError."""
+    try:
+        raise OSError(28, "No space left on device")
+    except OSError:
+        raise RuntimeError("[enforce fail at inline_container.cc:672] . unexpected pos") from None
+
+
+@pytest.mark.parametrize("full_disk", [_os_full_disk, _torch_full_disk], ids=["os", "torch"])
+def test_a_full_disk_is_named_and_leaves_the_checkpoints_intact(tmp_path, monkeypatch, full_disk):
     train(make_model(), TRAIN, VAL, config(epochs=1), tmp_path, progress=False)
     before = read_checkpoint(tmp_path / "last.pt")["epoch"]
-
-    def full_disk(contents, file):
-        raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(checkpoints.torch, "save", full_disk)
     with pytest.raises(CheckpointError, match=r"no space left on the device to write .*\.pt"):

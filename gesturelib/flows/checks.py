@@ -9,6 +9,8 @@ is reported where it is made and not as a matrix-size error deep inside torch.
 
 from __future__ import annotations
 
+import numbers
+
 import torch
 
 
@@ -81,3 +83,11 @@ def check_input(
 def sum_per_sample(values: torch.Tensor) -> torch.Tensor:
     """Sum every axis but the first: ``(B, ...)`` -> ``(B,)``."""
     return values.flatten(1).sum(1) if values.dim() > 1 else values
+
+
+def check_sizes(**sizes) -> None:
+    """Raise unless every size is an integer: ``cond_dim`` >= 0, ``dim`` >= 2, others >= 1."""
+    for name, value in sizes.items():
+        least = {"cond_dim": 0, "dim": 2}.get(name, 1)
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least:
+            raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")

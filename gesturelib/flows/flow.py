@@ -23,6 +23,7 @@ Use :func:`glow` to build a flow in one call.
 from __future__ import annotations
 
 import contextlib
+import numbers
 from collections.abc import Sequence
 
 import torch
@@ -31,7 +32,7 @@ from torch import nn
 
 from gesturelib.flows.actnorm import ActNorm
 from gesturelib.flows.base import StandardNormal, StudentT
-from gesturelib.flows.checks import check_input, sum_per_sample
+from gesturelib.flows.checks import check_input, check_sizes, sum_per_sample
 from gesturelib.flows.coupling import AdditiveCoupling, AffineCoupling
 from gesturelib.flows.linear import InvertibleLinear
 
@@ -237,13 +238,18 @@ class Flow(FlowBase):
             raise ValueError("give the number of samples n, a batch shape (B,) or (B, T), or cond")
         shape = tuple(cond.shape[:-1]) if cond is not None else None
         if n_or_shape is not None:
-            wanted = (n_or_shape,) if isinstance(n_or_shape, int) else tuple(n_or_shape)
-            if (shape is not None and wanted != shape) or len(wanted) not in (1, 2):
+            wanted = (n_or_shape,) if isinstance(n_or_shape, numbers.Integral) else n_or_shape
+            if not (
+                isinstance(wanted, Sequence)
+                and len(wanted) in (1, 2)
+                and all(isinstance(n, numbers.Integral) and n >= 1 for n in wanted)
+                and (shape is None or tuple(wanted) == shape)
+            ):
                 raise ValueError(
-                    f"the sample shape must be n, (B,) or (B, T) and match cond's leading shape "
-                    f"{shape}; got {wanted}"
+                    f"the sample shape must be a positive count n, (B,) or (B, T), matching "
+                    f"cond's leading shape {shape}; got {n_or_shape!r}"
                 )
-            shape = wanted
+            shape = tuple(int(n) for n in wanted)
         return self.inverse(self.noise(shape, temperature, generator), cond)[0]
 
 
@@ -276,8 +282,7 @@ def glow(
     Returns:
         The :class:`Flow`.
     """
-    if steps < 1:
-        raise ValueError(f"steps must be at least 1, got {steps}")
+    check_sizes(dim=dim, steps=steps, hidden=hidden, cond_dim=cond_dim)
     linear_init = linear_init or ("reverse" if dim == 2 else "rotation")
     base = StandardNormal(dim) if df is None else StudentT(dim, df)
     with torch.random.fork_rng(devices=[]):

@@ -24,7 +24,7 @@ from torch import nn
 
 from gesturelib.flows.actnorm import ActNorm
 from gesturelib.flows.base import StandardNormal, StudentT
-from gesturelib.flows.checks import sum_per_sample
+from gesturelib.flows.checks import check_sizes, sum_per_sample
 from gesturelib.flows.conditioners import ConditionerState
 from gesturelib.flows.coupling import RecurrentCoupling
 from gesturelib.flows.flow import FlowBase, invert_linear_and_actnorm
@@ -102,8 +102,8 @@ class RecurrentFlow(FlowBase):
             ``(z, logdet, state)``: ``logdet`` ``(B,)`` summed over frames, and the state after
             the last frame.
         """
-        self.check(x, cond)
         states = self._states(state)
+        self.check(x, cond, state=state)
         logdet = x.new_zeros(x.shape[0])
         for k, step in enumerate(self.steps):
             x, step_logdet, states[k] = step(x, cond, states[k])
@@ -112,9 +112,9 @@ class RecurrentFlow(FlowBase):
 
     def inverse(self, z: torch.Tensor, cond=None, state: FlowState | None = None):
         """Noise -> data: ``(x, logdet, state)`` with ``logdet`` ``(B,)`` = log|det dx/dz|."""
-        self.check(z, cond, name="z")
-        self.check_initialised()
         states = self._states(state)
+        self.check(z, cond, name="z", state=state)
+        self.check_initialised()
         logdet = z.new_zeros(z.shape[0])
         for k in reversed(range(len(self.steps))):
             z, step_logdet, states[k] = self.steps[k].inverse(z, cond, states[k])
@@ -161,6 +161,17 @@ class RecurrentFlow(FlowBase):
             )
         return list(state)
 
+    def check(self, x, cond, name: str = "x", state: FlowState | None = None) -> None:
+        """:meth:`FlowBase.check`, and a state (if any) of as many sequences as ``x``."""
+        super().check(x, cond, name)
+        if state is not None:
+            first = state[0][0] if isinstance(state[0], tuple | list) else state[0]
+            if isinstance(first, torch.Tensor) and first.shape[1] != x.shape[0]:
+                raise ValueError(
+                    f"the state is of {first.shape[1]} sequences but {name} of {x.shape[0]}: "
+                    "carry the state of the same batch, or start afresh with state=None"
+                )
+
 
 def recurrent_glow(
     dim: int,
@@ -184,8 +195,7 @@ def recurrent_glow(
     Returns:
         The :class:`RecurrentFlow`.
     """
-    if steps < 1:
-        raise ValueError(f"steps must be at least 1, got {steps}")
+    check_sizes(dim=dim, steps=steps, hidden=hidden, cond_dim=cond_dim, num_layers=num_layers)
     if coupling not in ("affine", "additive"):
         raise ValueError(f"unknown coupling {coupling!r}; choose 'affine' or 'additive'")
     base = StandardNormal(dim) if df is None else StudentT(dim, df)

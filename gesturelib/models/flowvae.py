@@ -178,6 +178,11 @@ class _LatentFlowModel(nn.Module):
 
     def __init__(self, config: LatentFlowConfig):
         super().__init__()
+        if not isinstance(config, self.config_class):
+            raise TypeError(
+                f"{type(self).__name__} needs a {self.config_class.__name__}, got "
+                f"{type(config).__name__}"
+            )
         self.config = config
         self.control = ControlEncoder(config, config.hidden)
         self.flow: RecurrentFlow = recurrent_glow(
