@@ -1,8 +1,28 @@
-"""Fixtures shared by the test modules: a tiny dataset on disk and a quick MoGlow run trained on it."""
+"""Fixtures shared by the test modules: windows of a short conversation, a tiny dataset on disk and
+a quick MoGlow run trained on it."""
 
 import pytest
+import torch
 
 from gesturelib.cli import main
+
+
+@pytest.fixture(scope="session")
+def short_windows():
+    """A short conversation, its normaliser, its 12-frame windows (context: 2 past poses, speech
+    2 frames back and 3 ahead) and the first three of them stacked as a batch."""
+    from data_synth import generate_conversation
+    from gesturelib.data import ConversationFeatures, Normaliser, WindowConfig, WindowDataset
+
+    conversation = generate_conversation(8.0, seed=5)
+    features = ConversationFeatures.from_conversation(conversation)
+    normaliser = Normaliser.fit([features])
+    windows = WindowConfig(
+        speech_past=2, speech_future=3, past_poses=2, sequence_length=12, stride=12
+    )
+    dataset = WindowDataset([features], windows, normaliser)
+    batch = {name: torch.stack([dataset[i][name] for i in range(3)]) for name in dataset[0]}
+    return conversation, normaliser, batch, dataset
 
 
 @pytest.fixture(scope="session")

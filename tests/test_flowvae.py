@@ -8,9 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from data_synth import generate_conversation
 from gesturelib.checkpoints import CheckpointMismatchError, load_model
-from gesturelib.data import ConversationFeatures, Normaliser, WindowConfig, WindowDataset
 from gesturelib.features import mel_spectrogram
 from gesturelib.models import (
     FlowVAE,
@@ -38,17 +36,8 @@ ELBO = VariationalFlowVAEConfig(**SIZES)
 
 
 @pytest.fixture(scope="module")
-def data():
-    """A short conversation, its normaliser and three 12-frame windows of it as a batch."""
-    conversation = generate_conversation(8.0, seed=5)
-    features = ConversationFeatures.from_conversation(conversation)
-    normaliser = Normaliser.fit([features])
-    windows = WindowConfig(
-        speech_past=2, speech_future=3, past_poses=2, sequence_length=12, stride=12
-    )
-    dataset = WindowDataset([features], windows, normaliser)
-    batch = {name: torch.stack([dataset[i][name] for i in range(3)]) for name in dataset[0]}
-    return conversation, normaliser, batch, dataset
+def data(short_windows):
+    return short_windows
 
 
 def build(config, normaliser, batch, seed=0, perturb=True):

@@ -7,8 +7,6 @@ import pytest
 import torch
 from torch.autograd.functional import jacobian
 
-from data_synth import generate_conversation
-from gesturelib.data import ConversationFeatures, Normaliser, WindowConfig, WindowDataset
 from gesturelib.features import mel_spectrogram
 from gesturelib.models import MoGlow, MoGlowConfig
 from gesturelib.pose_surface import T_POSE_DIRECTIONS, SurfaceNoise, limb_directions, project
@@ -20,17 +18,8 @@ SMALL = MoGlowConfig.quick(speech_past=2, speech_future=3, past_poses=2, steps=2
 
 
 @pytest.fixture(scope="module")
-def data():
-    """Features of a short conversation, its normaliser and 12-frame windows of it."""
-    conversation = generate_conversation(8.0, seed=5)
-    features = ConversationFeatures.from_conversation(conversation)
-    normaliser = Normaliser.fit([features])
-    windows = WindowConfig(
-        speech_past=2, speech_future=3, past_poses=2, sequence_length=12, stride=12
-    )
-    dataset = WindowDataset([features], windows, normaliser)
-    batch = {name: torch.stack([dataset[i][name] for i in range(3)]) for name in dataset[0]}
-    return conversation, normaliser, batch
+def data(short_windows):
+    return short_windows[:3]
 
 
 def trained_looking(config, normaliser, batch, seed=0):
