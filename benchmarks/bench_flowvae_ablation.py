@@ -58,8 +58,9 @@ def run(recipe, quick: bool, seed: int, weight: float, splits, datasets, normali
     motions = generate_for(test, model, normaliser, samples=3, seed=0)
     scores = [headline_measures(test, [m[k] for m in motions]) for k in range(3)]
     row = {key: float(np.mean([s[key] for s in scores])) for key in ("hellinger", "ratio", "lead")}
-    row["mse"] = history.val["mse"][-1]
-    row["sample_mse"] = history.val["sample_mse"][-1]
+    best = history.best_epoch - 1  # the epoch whose weights the model holds
+    row["mse"] = history.val["mse"][best]
+    row["sample_mse"] = history.val["sample_mse"][best]
     row["minutes"] = sum(history.epoch_seconds) / 60
     return row
 

@@ -38,7 +38,7 @@ from torch import nn
 from gesturelib.configs import config_from_dict
 from gesturelib.runtime import device_of
 
-FORMAT, VERSION = "gesturelib-run", 2
+FORMAT, VERSION = "gesturelib-run", 3
 IDENTITY = ("model_class", "model_config", "train_config", "data")
 _LABELS = {
     "model_class": "model class",
@@ -310,15 +310,18 @@ def hash_value(hasher, value) -> None:
             hasher.update(f"<{key}>".encode())
             hash_value(hasher, value[key])
     elif isinstance(value, list | tuple):
+        hasher.update(f"[{len(value)}".encode())
         for item in value:
             hash_value(hasher, item)
+            hasher.update(b",")
+        hasher.update(b"]")
     elif isinstance(value, torch.Tensor | np.ndarray):
         array = value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else value
         array = np.ascontiguousarray(array)
         hasher.update(f"{array.dtype}{array.shape}".encode())
         hasher.update(array.tobytes())
     else:
-        hasher.update(repr(value).encode())
+        hasher.update(f"{type(value).__name__}:{value!r};".encode())
 
 
 def run_key(identity: dict) -> str:

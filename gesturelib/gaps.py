@@ -41,7 +41,7 @@ def interpolate_gaps(rotations, visible) -> np.ndarray:
         visible: ``(T, 9)`` bool, False where a limb was not seen.
     Returns:
         ``(T, 9, 6)``: the seen limbs as they were, the hidden ones filled (a limb never seen
-        keeps its values).
+        keeps its values, put back on the surface).
     """
     rotations, visible = _checked(rotations, visible)
     filled = rotations.copy()

@@ -418,7 +418,7 @@ def lead_lag(reference, signal, fps, max_lag_s: float) -> float:
     before, peak, after = correlation[best - 1 : best + 2]
     curvature = before - 2.0 * peak + after
     offset = 0.5 * (before - after) / curvature if curvature < 0 else 0.0
-    return float(lags[best] + offset / _check_fps(fps))
+    return float(lags[best] + offset * (lags[1] - lags[0]))
 
 
 def _pearson(signal: np.ndarray, reference: np.ndarray, lag: int) -> float:

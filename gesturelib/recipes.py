@@ -9,7 +9,7 @@ name                model                   trained on
 ``moglow``          :class:`MoGlow`         4 s excerpts (teacher forcing), built with the normaliser
 ``flowvae``         :class:`FlowVAE`        4 s excerpts, as MoGlow
 ``flowvae_elbo``    the variational         4 s excerpts, built with the normaliser
-                    :class:`FlowVAE`
+                    Flow-VAE
 ``cvae``            :class:`CVAE`           2 s excerpts
 ``aud2pose``        :class:`Aud2Pose`       single frames with their speech windows
 ``motion_dae``      the denoising            excerpts of 1 s (its frames independent); stage 1 of

@@ -474,7 +474,8 @@ def load_or_train(
             ``lambda config: Aud2Repr2Pose.from_autoencoder(denoiser, config)``. The hash then
             also covers the built model's weights, so that a retrained inner model never brings
             back a run trained around the old one.
-        data_fingerprint: identifies the data; by default from a few items of both datasets.
+        data_fingerprint: identifies the data; by default
+            :func:`~gesturelib.checkpoints.dataset_fingerprint` of both datasets.
         progress: show the progress bar while training, or a line naming the file loaded.
     Returns:
         ``(model, history)``: the model with its best weights, on ``train_config.device``, in

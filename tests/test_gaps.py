@@ -23,7 +23,9 @@ def test_linear_interpolation_fills_a_gap_between_its_ends_and_keeps_what_was_se
     visible[40:60, JOINT_INDEX["left_wrist"]] = False
     visible[:10, JOINT_INDEX["right_wrist"]] = False  # a gap at the start is held
     np.testing.assert_allclose(interpolate_gaps(still, visible), still, atol=1e-9)
-    filled = interpolate_gaps(rotations, visible)
+    lost = rotations.copy()
+    lost[~visible] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]  # what a tracker holds there: no clue
+    filled = interpolate_gaps(lost, visible)
     np.testing.assert_array_equal(filled[visible], rotations[visible])
     wrist = JOINT_INDEX["left_wrist"]
     ends = limb_angle_error(rotations[39], rotations[60])[wrist]
@@ -50,8 +52,6 @@ def test_limb_angle_error_on_known_turns():
         turned.append(project(shortest_arc(source, direction)[..., :2, :].flatten(-2)).numpy())
     np.testing.assert_allclose(limb_angle_error(turned[1], turned[0]), 30.0, atol=1e-6)
     np.testing.assert_allclose(limb_angle_error(turned[2], turned[0]), 90.0, atol=1e-6)
-    with pytest.raises(ValueError, match="visible must be a bool mask"):
-        interpolate_gaps(np.repeat(turned[0][None], 3, axis=0), np.ones((3, 9)))
 
 
 def test_the_papers_autoencoder_fills_lost_limbs_better_than_the_mean_pose():
@@ -82,3 +82,38 @@ def test_the_papers_autoencoder_fills_lost_limbs_better_than_the_mean_pose():
         for name, fill in (("autoencoder", by_autoencoder), ("mean pose", by_mean))
     }
     assert errors["autoencoder"] < 0.8 * errors["mean pose"], errors
+
+
+def test_the_autoencoder_fills_each_hidden_limb_from_the_window_centred_on_its_frame():
+    from gesturelib.models import MotionDAEConfig, MotionDenoisingAutoencoder
+
+    class FrameNumber(MotionDenoisingAutoencoder):
+        """Outputs, for every frame of its window, that frame's sternum value in every number."""
+
+        def forward(self, windows):
+            frames = windows.unflatten(-1, (self.config.window, 54))
+            return frames[..., :1].expand(frames.shape).flatten(-2)
+
+    autoencoder = FrameNumber(MotionDAEConfig.taylor())
+    frames = torch.arange(30, dtype=torch.float32)
+    pose = frames[:, None].expand(30, 54).clone()  # every number of frame t is t
+    visible = torch.ones(30, 9, dtype=torch.bool)
+    visible[10:14, JOINT_INDEX["left_wrist"]] = False
+    filled = autoencoder.fill(pose, visible)
+    wrist = slice(6 * JOINT_INDEX["left_wrist"], 6 * JOINT_INDEX["left_wrist"] + 6)
+    torch.testing.assert_close(filled[10:14, wrist], frames[10:14, None].expand(4, 6))
+    assert torch.equal(
+        filled[visible.repeat_interleave(6, dim=1)], pose[visible.repeat_interleave(6, dim=1)]
+    )
+    with pytest.raises(ValueError, match=r"visible must be a bool mask \(T, 9\)"):
+        autoencoder.fill(pose, visible.int())
+    with pytest.raises(ValueError, match=r"pose must be \(T, 54\)"):
+        autoencoder.fill(pose[None], visible)
+
+
+def test_interpolate_gaps_refuses_a_mask_or_rotations_of_the_wrong_kind():
+    rotations = np.zeros((3, 9, 6))
+    with pytest.raises(ValueError, match="visible must be a bool mask"):
+        interpolate_gaps(rotations, np.ones((3, 9)))
+    with pytest.raises(ValueError, match=r"rotations must have shape \(T, 9, 6\)"):
+        interpolate_gaps(rotations.reshape(3, 54), np.ones((3, 9), dtype=bool))

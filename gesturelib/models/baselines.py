@@ -360,6 +360,11 @@ class MotionDenoisingAutoencoder(nn.Module):
         (pose,) = batch_parts(
             batch, {"pose": (config.pose_dim,)}, "MotionDenoisingAutoencoder.loss"
         )
+        if pose.shape[1] < config.window:
+            raise ValueError(
+                f"MotionDenoisingAutoencoder.loss needs excerpts of at least window = "
+                f"{config.window} frames, got {pose.shape[1]}"
+            )
         windows = pose.unfold(1, config.window, 1).transpose(-1, -2)  # (B, L - w + 1, w, 54)
         clean = windows.flatten(-2)
         corrupted = clean
@@ -373,11 +378,20 @@ class MotionDenoisingAutoencoder(nn.Module):
 
     @torch.no_grad()
     def fill(self, pose: torch.Tensor, visible: torch.Tensor) -> torch.Tensor:
-        """Poses ``(T, 54)`` (normalised) whose limbs hidden in ``visible (T, 9)`` are replaced
-        by the reconstruction of the window centred on their frame (the edges padded with the
-        first and last pose); the seen limbs are kept as they are."""
+        """Poses ``(T, 54)`` (normalised) whose limbs hidden in ``visible (T, 9)`` (bool) are
+        replaced by the reconstruction of the window centred on their frame, its hidden limbs
+        zeroed as in training and its ends padded with the first and last frame; the seen limbs
+        are kept as they are. The filled numbers are the network's: project them onto the pose
+        surface (:func:`gesturelib.pose_surface.project`) for rotations."""
         window, limbs = self.config.window, self.config.pose_dim // 6
-        hidden = ~visible.to(torch.bool)
+        if pose.ndim != 2 or pose.shape[1] != self.config.pose_dim:
+            raise ValueError(f"pose must be (T, {self.config.pose_dim}), got {tuple(pose.shape)}")
+        if tuple(visible.shape) != (len(pose), limbs) or visible.dtype != torch.bool:
+            raise ValueError(
+                f"visible must be a bool mask (T, {limbs}) = {(len(pose), limbs)}, got "
+                f"{visible.dtype} {tuple(visible.shape)}"
+            )
+        hidden = ~visible
         zeroed = (pose.unflatten(-1, (limbs, 6)) * (~hidden)[..., None]).flatten(-2)
         half = window // 2
         padded = torch.cat(
@@ -411,6 +425,12 @@ class Aud2Repr2PoseConfig(SpeechEncoderConfig):
             raise ValueError(
                 "Aud2Repr2PoseConfig.autoencoder must be a MotionDAEConfig, got "
                 f"{type(self.autoencoder).__name__}"
+            )
+        if self.autoencoder.window != 1 or self.autoencoder.batch_norm:
+            raise ValueError(
+                "Aud2Repr2Pose predicts the representation of one pose: its autoencoder needs "
+                f"window=1 and no batch norm, got window={self.autoencoder.window}, "
+                f"batch_norm={self.autoencoder.batch_norm}"
             )
 
     @classmethod

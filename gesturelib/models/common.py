@@ -61,6 +61,15 @@ def batch_parts(
     return parts
 
 
+def check_config_type(model: nn.Module, config) -> None:
+    """Raise unless ``config`` is an instance of ``model``'s ``config_class``."""
+    if not isinstance(config, model.config_class):
+        raise TypeError(
+            f"{type(model).__name__} needs a {model.config_class.__name__}, got "
+            f"{type(config).__name__}"
+        )
+
+
 def mlp(sizes: list[int]) -> nn.Sequential:
     """Linear layers of the given sizes with ReLU between them (none after the last)."""
     layers = []

@@ -41,7 +41,7 @@ from torch import nn
 
 from gesturelib.configs import check_fields
 from gesturelib.flows import RecurrentFlow, recurrent_glow
-from gesturelib.models.common import batch_parts
+from gesturelib.models.common import batch_parts, check_config_type
 from gesturelib.models.control import ControlConfig, ControlEncoder
 from gesturelib.pose_surface import SurfaceNoise
 from gesturelib.skeleton import POSE_DIM
@@ -104,11 +104,7 @@ class MoGlow(nn.Module):
 
     def __init__(self, config: MoGlowConfig, normaliser=None):
         super().__init__()
-        if not isinstance(config, self.config_class):
-            raise TypeError(
-                f"{type(self).__name__} needs a {self.config_class.__name__}, got "
-                f"{type(config).__name__}"
-            )
+        check_config_type(self, config)
         self.config = config
         self.control = ControlEncoder(config, config.hidden)
         self.flow: RecurrentFlow = recurrent_glow(
