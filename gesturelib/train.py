@@ -42,6 +42,7 @@ from torch.utils.data import DataLoader
 from tqdm.auto import tqdm
 
 from gesturelib.checkpoints import (
+    VERSION,
     RunFolder,
     dataset_fingerprint,
     load_state,
@@ -460,8 +461,9 @@ def load_or_train(
     """The model trained on this data with these configs: loaded if cached, else trained.
 
     The run lives in ``cache_dir/<ModelName>-<hash>/``, the hash covering the model class and
-    config, the training config (not its device or workers) and the data, so another notebook
-    asking for the same gets the same files. A finished run loads at once from its ``best.pt``;
+    config, the training config (not its device or workers), the data and the run format's
+    version, so another notebook asking for the same gets the same files, and a newer version of
+    the code trains afresh beside the old files instead of tripping over them. A finished run loads at once from its ``best.pt``;
     an interrupted one resumes from ``last.pt``; a missing one is trained from initial weights
     drawn with ``train_config.seed``.
 
@@ -491,10 +493,8 @@ def load_or_train(
         fingerprint = run_key({"data": fingerprint, "initial_state": state_fingerprint(model)})
     identity = _identity(model, train_config, fingerprint)
     key_config = {k: v for k, v in identity["train_config"].items() if k not in EXECUTION_FIELDS}
-    folder = (
-        Path(cache_dir)
-        / f"{model_class.__name__}-{run_key({**identity, 'train_config': key_config})}"
-    )
+    key = run_key({**identity, "train_config": key_config, "version": VERSION})
+    folder = Path(cache_dir) / f"{model_class.__name__}-{key}"
     best = RunFolder(folder, identity).best
     if best.exists():
         checkpoint = read_checkpoint(best, kind="best")
