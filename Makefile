@@ -12,7 +12,7 @@ TORCH_VERSION := $(shell sed -n 's/^torch==//p' requirements-lock.txt)
 STAMP := $(VENV)/.installed
 OUT ?= outputs/demo
 
-.PHONY: setup demo test check-full lab lint benchmark lock clean
+.PHONY: setup demo test check-full results lab lint benchmark lock clean
 
 setup: $(STAMP)
 
@@ -41,6 +41,11 @@ test: setup
 NB ?=
 check-full: setup
 	$(BIN)/python tools/check_full.py $(NB)
+
+## make results: every model from three seeds against the references (full mode, about an hour
+## the first time); writes outputs/results/ and the README's results table
+results: setup
+	$(BIN)/python tools/results.py
 
 ## make lab: open JupyterLab on the notebooks
 lab: setup

@@ -23,17 +23,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from data_synth import ensure_dataset, load_dataset
-from data_synth.dataset import (
-    FULL_CONVERSATION_S,
-    FULL_MINUTES,
-    QUICK_CONVERSATION_S,
-    QUICK_MINUTES,
-)
+from data_synth import load_dataset
 from gesturelib.data import make_datasets
 from gesturelib.evaluation import generate_for, headline_measures
 from gesturelib.recipes import RECIPES
-from gesturelib.runtime import data_folder
+from gesturelib.runtime import course_data
 from gesturelib.train import load_or_train
 
 REPO = Path(__file__).resolve().parents[1]
@@ -73,14 +67,7 @@ def main() -> None:
     if args.seeds < 2:
         parser.error(f"--seeds must be at least 2 (for a spread), got {args.seeds}")
     torch.set_num_threads(1)
-    folder = data_folder(args.quick)
-    ensure_dataset(
-        folder,
-        minutes=QUICK_MINUTES if args.quick else FULL_MINUTES,
-        seed=0,
-        conversation_s=QUICK_CONVERSATION_S if args.quick else FULL_CONVERSATION_S,
-    )
-    splits = load_dataset(folder)
+    splits = load_dataset(course_data(args.quick))
     recipe = RECIPES["flowvae"]
     datasets, normaliser = make_datasets(splits, recipe.settings(args.quick)[0])
     rows = {}

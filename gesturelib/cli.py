@@ -4,6 +4,9 @@ Commands (``docs/architecture.md`` has the contract they share):
     train MODEL --out RUN     train a model of the course into a run folder
     generate RUN --audio WAV | --conversation STEM --out DIR
                               the agent's motion for a recording: motion.npz and agent.mp4
+    evaluate RUN [RUN ...] --out DIR
+                              score runs and the references on held-out conversations:
+                              metrics.csv, models.csv and figures
     info RUN                  what a run folder holds
     demo                      generate a conversation and render it into a folder
 
@@ -65,16 +68,10 @@ def run_train(args) -> Path:
     """Train ``args.model`` into the run folder ``args.out``; return the folder."""
     import torch
 
-    from data_synth import ensure_dataset, load_dataset
-    from data_synth.dataset import (
-        FULL_CONVERSATION_S,
-        FULL_MINUTES,
-        QUICK_CONVERSATION_S,
-        QUICK_MINUTES,
-    )
+    from data_synth import load_dataset
     from gesturelib.checkpoints import FORMAT, VERSION
     from gesturelib.recipes import RECIPES
-    from gesturelib.runtime import data_folder, quick_mode
+    from gesturelib.runtime import course_data, quick_mode
     from gesturelib.train import train
 
     quick = args.quick or quick_mode()
@@ -93,14 +90,7 @@ def run_train(args) -> Path:
         for name in RUN_FILES:
             path = out / name
             shutil.rmtree(path) if path.is_dir() else path.unlink(missing_ok=True)
-    if args.data is None:
-        data = data_folder(quick)
-        minutes, seconds = (
-            (QUICK_MINUTES, QUICK_CONVERSATION_S) if quick else (FULL_MINUTES, FULL_CONVERSATION_S)
-        )
-        ensure_dataset(data, minutes=minutes, seed=0, conversation_s=seconds)
-    else:
-        data = Path(args.data)
+    data = course_data(quick) if args.data is None else Path(args.data)
     splits = load_dataset(data)
     torch.set_num_threads(args.threads)
 
@@ -295,6 +285,121 @@ def run_info(args) -> str:
 
 
 # ---------------------------------------------------------------------------------------------
+# evaluate
+# ---------------------------------------------------------------------------------------------
+
+
+def run_evaluate(args) -> list[Path]:
+    """Score run folders and the references on held-out conversations; return the files written:
+    ``metrics.csv``, ``models.csv`` and the figures."""
+    import matplotlib
+    import torch
+
+    matplotlib.use("Agg")
+    from data_synth import load_dataset
+    from gesturelib.evaluation import report
+    from gesturelib.evaluation.fgd import feature_network
+    from gesturelib.evaluation.table import evaluate_models
+    from gesturelib.runtime import quick_mode
+
+    quick = args.quick or quick_mode()
+    groups = _run_groups(args.runs)
+    splits = load_dataset(_evaluation_data(args, quick, groups))
+    if not (splits["test"] and splits["val"]):
+        raise CommandError("evaluation needs conversations in both the test and the val split")
+    out = Path(args.out)
+    _output_folder(out, args.overwrite, "evaluate")
+    torch.set_num_threads(args.threads)
+
+    features = feature_network(
+        [c.positions for c in splits["train"]],
+        [c.positions for c in splits["val"]],
+        args.cache,
+        quick=quick,
+    )
+    models = {name: [(m, n) for m, n, *_ in runs] for name, runs in groups.items()}
+    rows, draws = evaluate_models(models, splits, args.samples, features)
+    histories = {name: [(m, h) for m, _, h, _ in runs] for name, runs in groups.items()}
+    return [
+        report.write_table(rows, out / "metrics.csv"),
+        report.write_models(report.models_table(histories), out / "models.csv"),
+        *report.write_figures(draws, splits, out),
+    ]
+
+
+def _run_groups(folders: list[Path]) -> dict[str, list]:
+    """The runs, loaded, grouped into the table's rows: runs of one model, config and data that
+    differ only in their seed share a row. Row name -> ``[(model, normaliser, history, folder),
+    ...]``,
+    each with its run folder last."""
+    from gesturelib.evaluation.table import REFERENCES
+    from gesturelib.history import History
+    from gesturelib.train import EXECUTION_FIELDS
+
+    groups: dict[str, list] = {}
+    for folder in folders:
+        model, normaliser, checkpoint = load_run(folder)
+        if not hasattr(model, "step"):
+            raise CommandError(
+                f"{folder} holds a {type(model).__name__}, which does not generate motion"
+            )
+        kept = {
+            k: v
+            for k, v in checkpoint["train_config"].items()
+            if k not in EXECUTION_FIELDS | {"seed"}
+        }
+        key = json.dumps(
+            [checkpoint["model_class"], checkpoint["model_config"], kept, checkpoint["data"]],
+            sort_keys=True,
+        )
+        history = History.from_dict(checkpoint["history"])
+        groups.setdefault(key, []).append((model, normaliser, history, Path(folder)))
+    named = {}
+    for members in groups.values():
+        names = [folder.absolute().name for *_, folder in members]
+        name = names[0] if len(members) == 1 else _common_name(names, members[0][0])
+        if name in named or name in REFERENCES:
+            raise CommandError(
+                f"two rows would be called {name!r} (a run folder's name, or a reference's); "
+                "rename one of the run folders"
+            )
+        named[name] = members
+    return named
+
+
+def _common_name(names: list[str], model) -> str:
+    """The row name of runs from several seeds: their folders' common prefix (``moglow-1``,
+    ``moglow-2``: ``moglow``), else the model's class."""
+    import os
+
+    prefix = os.path.commonprefix(names).rstrip("-_ .0123456789")
+    return prefix or type(model).__name__
+
+
+def _evaluation_data(args, quick: bool, groups: dict) -> Path:
+    """The dataset to evaluate on: ``--data``, else the one the runs were trained on, else the
+    course's synthetic one (generated if absent)."""
+    from gesturelib.runtime import course_data
+
+    if args.data is not None:
+        return Path(args.data)
+    trained_on = set()
+    for *_, folder in (run for runs in groups.values() for run in runs):
+        summary = folder / "run.json"
+        if summary.exists():
+            trained_on.add(json.loads(summary.read_text()).get("data"))
+    trained_on.discard(None)
+    if len(trained_on) > 1:
+        raise CommandError(
+            f"the runs were trained on different data ({', '.join(sorted(trained_on))}); "
+            "choose one with --data"
+        )
+    if trained_on and Path(next(iter(trained_on))).is_dir():
+        return Path(next(iter(trained_on)))
+    return course_data(quick)
+
+
+# ---------------------------------------------------------------------------------------------
 # demo
 # ---------------------------------------------------------------------------------------------
 
@@ -408,6 +513,27 @@ def _parser() -> argparse.ArgumentParser:
     )
     generate.add_argument("--device", default="cpu")
 
+    evaluate = commands.add_parser(
+        "evaluate", help="score run folders and the references on held-out conversations"
+    )
+    evaluate.add_argument("runs", type=Path, nargs="+", metavar="RUN", help="run folders")
+    evaluate.add_argument("--out", required=True, type=Path, help="the output folder")
+    evaluate.add_argument("--data", type=Path, help="a dataset folder (default: the runs' own)")
+    evaluate.add_argument(
+        "--samples", type=_at_least(1), default=3, help="samples per conversation (default 3)"
+    )
+    evaluate.add_argument("--quick", action="store_true", help="quick data and feature network")
+    evaluate.add_argument(
+        "--cache",
+        type=Path,
+        default=Path("checkpoints"),
+        help="where the motion-feature network of the FGD is cached (default checkpoints/)",
+    )
+    evaluate.add_argument("--threads", type=_at_least(1), default=1, help="torch threads")
+    evaluate.add_argument(
+        "--overwrite", action="store_true", help="write into a folder of others' files"
+    )
+
     info = commands.add_parser("info", help="what a run folder holds")
     info.add_argument("run", type=Path)
 
@@ -434,6 +560,9 @@ def main(argv: list[str] | None = None) -> int:
                 f"Wrote {len(files)} files to {args.out}/: "
                 + ", ".join(str(f.relative_to(args.out)) for f in files)
             )
+        elif args.command == "evaluate":
+            files = run_evaluate(args)
+            print(f"Wrote {len(files)} files to {args.out}/: " + ", ".join(f.name for f in files))
         elif args.command == "info":
             print(run_info(args))
         else:

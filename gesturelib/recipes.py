@@ -183,3 +183,34 @@ RECIPES: dict[str, Recipe] = {
 MODEL_CLASSES: dict[str, type[nn.Module]] = {
     r.model_class.__name__: r.model_class for r in RECIPES.values()
 }
+
+
+def trained(name: str, splits, quick: bool, cache_dir, seed: int = 0, progress: bool = False):
+    """The model of recipe ``name`` trained on ``splits`` (a dataset's ``{"train": [...],
+    "val": [...], ...}`` conversations) from ``seed``, through the shared load-or-train cache in
+    ``cache_dir`` (a stage-one model first, where the recipe has one).
+
+    Returns:
+        ``(model, history, normaliser)``.
+    """
+    from gesturelib.data import make_datasets
+    from gesturelib.train import load_or_train
+
+    recipe = RECIPES[name]
+    inner = None
+    if recipe.stage_one is not None:
+        inner = trained(recipe.stage_one, splits, quick, cache_dir, seed, progress)[0]
+    windows, config, training = recipe.settings(quick, seed=seed)
+    datasets, normaliser = make_datasets(splits, windows)
+    model, history = load_or_train(
+        recipe.model_class,
+        config,
+        datasets["train"],
+        datasets["val"],
+        training,
+        cache_dir,
+        normaliser,
+        build=lambda c: recipe.make(c, normaliser, inner),
+        progress=progress,
+    )
+    return model, history, normaliser

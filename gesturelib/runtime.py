@@ -92,3 +92,22 @@ def data_folder(quick: bool) -> Path:
     repository = Path(__file__).resolve().parents[1]
     root = repository if (repository / "pyproject.toml").exists() else Path.cwd()
     return root / "data" / ("quick" if quick else "full")
+
+
+def course_data(quick: bool, progress: bool = True) -> Path:
+    """:func:`data_folder` with the course's quick or full synthetic dataset in it, generated the
+    first time (``data_synth.ensure_dataset``, which also replaces a stale one)."""
+    from data_synth import ensure_dataset
+    from data_synth.dataset import (
+        FULL_CONVERSATION_S,
+        FULL_MINUTES,
+        QUICK_CONVERSATION_S,
+        QUICK_MINUTES,
+    )
+
+    folder = data_folder(quick)
+    minutes, seconds = (
+        (QUICK_MINUTES, QUICK_CONVERSATION_S) if quick else (FULL_MINUTES, FULL_CONVERSATION_S)
+    )
+    ensure_dataset(folder, minutes=minutes, seed=0, conversation_s=seconds, progress=progress)
+    return folder

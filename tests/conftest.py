@@ -7,6 +7,16 @@ import torch
 from gesturelib.cli import main
 
 
+@pytest.fixture(scope="module")
+def one_thread():
+    """One torch thread for a module of small models: on the shared 2-core machine threads cost
+    more than they give (training was 5 times slower with two)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 @pytest.fixture(scope="session")
 def short_windows():
     """A short conversation, its normaliser, its 12-frame windows (context: 2 past poses, speech

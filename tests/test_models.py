@@ -32,13 +32,7 @@ W = WINDOW.speech_window
 SMALL_WINDOW = {"speech_past": WINDOW.speech_past, "speech_future": WINDOW.speech_future}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """The models here are tiny: threads cost more than they give (and the CPU is shared)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def make_batch(batch_size=4, length=5, seed=0, tau=WINDOW.past_poses, window=W):

@@ -1,0 +1,30 @@
+"""How generated motion is measured, against the ground truth, references and the generator's rules.
+
+* :mod:`~gesturelib.evaluation.headline`: the course's headline measures (wrist-speed
+  Hellinger distance, speaking/listening ratio, stroke lead), the references every model is
+  compared with, and generation for held-out conversations.
+"""
+
+from gesturelib.evaluation.headline import (
+    WRIST_SPEED_BINS,
+    generate_for,
+    headline_measures,
+    reference_motions,
+    speaking_listening_ratio,
+    stroke_lead,
+    wrist_speed_hellinger,
+    wrist_speed_histogram,
+    wrist_speeds,
+)
+
+__all__ = [
+    "WRIST_SPEED_BINS",
+    "generate_for",
+    "headline_measures",
+    "reference_motions",
+    "speaking_listening_ratio",
+    "stroke_lead",
+    "wrist_speed_hellinger",
+    "wrist_speed_histogram",
+    "wrist_speeds",
+]

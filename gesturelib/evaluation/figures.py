@@ -1,0 +1,107 @@
+"""The evaluation's pictures, for any set of systems: each takes ``motions``, a dict from a system's
+name to its keypoints ``(T, 9, 3)``, one per held-out conversation (one draw of each system).
+
+* :func:`plot_speed_histograms`: wrist-speed distributions against the ground truth's (what
+  the Hellinger distance summarises);
+* :func:`plot_mean_pose_distance`: each keypoint's distance from the mean pose, box plots per
+  joint (Taylor et al. 2021, Figure 6);
+* :func:`plot_speaking_listening`: the rate of change of that distance while the agent speaks
+  and while it listens (their Figure 8);
+* :func:`plot_overlays`: each system's skeleton drawn once a second, overlaid.
+"""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from gesturelib.conventions import FPS
+from gesturelib.evaluation.headline import WRIST_SPEED_BINS, wrist_speed_histogram
+from gesturelib.metrics import distance_from_mean_pose, speaking_listening_statistics
+from gesturelib.skeleton import KEYPOINTS
+
+
+def plot_speed_histograms(motions: dict, truth) -> plt.Figure:
+    """Wrist-speed histograms of each system (lines) over the ground truth's (grey)."""
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    centres = (WRIST_SPEED_BINS[:-1] + WRIST_SPEED_BINS[1:]) / 2
+    ax.fill_between(
+        centres, wrist_speed_histogram(truth), color="0.8", label="ground truth", step="mid"
+    )
+    for name, motion in motions.items():
+        ax.step(centres, wrist_speed_histogram(motion), where="mid", label=name, linewidth=1.2)
+    ax.set(xlabel="wrist speed (cm/s)", ylabel="share of frames", yscale="log", xlim=(0, 300))
+    ax.set_ylim(bottom=1e-4)
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    return fig
+
+
+def plot_mean_pose_distance(motions: dict, mean_pose: np.ndarray) -> plt.Figure:
+    """Box plots per keypoint of the distance from ``mean_pose`` ``(9, 3)``, one box per system."""
+    joints = range(len(KEYPOINTS))
+    names = list(motions)
+    fig, ax = plt.subplots(figsize=(10, 3.6))
+    width = 0.8 / len(names)
+    for s, name in enumerate(names):
+        distances = np.concatenate([distance_from_mean_pose(m, mean_pose) for m in motions[name]])
+        positions = np.arange(len(joints)) + (s - (len(names) - 1) / 2) * width
+        box = ax.boxplot(
+            [distances[:, j] for j in joints],
+            positions=positions,
+            widths=width * 0.9,
+            showfliers=False,
+            patch_artist=True,
+        )
+        for patch in box["boxes"]:
+            patch.set_facecolor(f"C{s}")
+        ax.plot([], [], color=f"C{s}", linewidth=6, label=name)
+    ax.set_xticks(range(len(joints)), [KEYPOINTS[j].replace("_", " ") for j in joints], fontsize=8)
+    ax.set(ylabel="distance from the mean pose (cm)")
+    ax.legend(fontsize=8, ncol=len(names))
+    fig.tight_layout()
+    return fig
+
+
+def plot_speaking_listening(motions: dict, conversations, mean_pose: np.ndarray) -> plt.Figure:
+    """Box plots of how fast the keypoints move towards or away from ``mean_pose`` (the size of
+    the change of their distance from it, cm/s, mean over keypoints), while the agent speaks and
+    while it listens, per system (Taylor et al., Figure 8)."""
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    for s, motion in enumerate(motions.values()):
+        for m, mode in enumerate(("speaking", "listening")):
+            rates = np.concatenate(
+                [
+                    np.abs(
+                        speaking_listening_statistics(p, c.activity, FPS, mean_pose)[mode][
+                            "distance_rate"
+                        ]
+                    ).mean(axis=1)
+                    for p, c in zip(motion, conversations, strict=True)
+                ]
+            )
+            box = ax.boxplot(
+                [rates], positions=[3 * s + m], widths=0.8, showfliers=False, patch_artist=True
+            )
+            box["boxes"][0].set(facecolor=f"C{s}", alpha=1.0 if m == 0 else 0.45)
+    ax.set_xticks(
+        [3 * s + 0.5 for s in range(len(motions))], list(motions), fontsize=8, rotation=20
+    )
+    ax.set(ylabel="|change of distance\nfrom the mean pose| (cm/s)")
+    ax.set_title("each system: speaking (dark), listening (light)", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def plot_overlays(motions: dict, seconds: float = 10.0, every_s: float = 1.0) -> plt.Figure:
+    """Each system's pose once every ``every_s`` over the first ``seconds`` of the first
+    conversation, overlaid (front view): where its hands go, at a glance."""
+    from gesturelib import viz
+
+    fig, axes = plt.subplots(1, len(motions), figsize=(2.4 * len(motions), 2.8), squeeze=False)
+    for ax, (name, motion) in zip(axes[0], motions.items(), strict=True):
+        poses = motion[0][: int(seconds * FPS) : int(every_s * FPS)]
+        viz.plot_pose(poses, views=("front",), axes=[ax], alpha=0.35)
+        ax.set_title(name, fontsize=9)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,90 @@
+"""gesturelib.evaluation.table and ``python -m gesturelib evaluate``: rows, spreads, references."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from gesturelib.cli import main
+from gesturelib.evaluation.report import read_table, write_table
+from gesturelib.evaluation.table import (
+    METRICS,
+    REFERENCES,
+    diversity,
+    reference_draws,
+    score_system,
+)
+
+
+@pytest.fixture(scope="module")
+def conversations():
+    from data_synth import generate_conversation
+
+    return [generate_conversation(30.0, seed=seed) for seed in (4, 5, 6)]
+
+
+def test_diversity_is_the_mean_distance_between_samples():
+    motion = np.zeros((20, 9, 3))
+    moved = motion + np.array([3.0, 0.0, 4.0])  # every keypoint 5 cm away
+    assert diversity([[motion, motion], [moved, moved]]) == pytest.approx(5.0)
+    assert diversity([[motion], [moved], [motion]]) == pytest.approx(10 / 3)  # pairs: 5, 0, 5
+    assert np.isnan(diversity([[motion]]))
+
+
+def test_the_references_rank_as_they_must(conversations):
+    """On every measure where it must hold: the floor is as good as motion gets, the mean pose
+    the least natural, and motion of another conversation breaks every rule the floor keeps."""
+    held_out, others = conversations[:2], conversations[2:]
+    mean_pose = np.mean([c.positions.mean(0) for c in conversations], axis=0)
+    draws = reference_draws(held_out, others, mean_pose, samples=2, seed=1)
+    assert list(draws) == list(REFERENCES)
+    rows = {name: score_system(held_out, runs) for name, runs in draws.items()}
+    truth, floor, mismatched, still = (rows[name] for name in REFERENCES)
+    assert truth["hellinger"] == 0 and np.isnan(truth["hellinger_sd"]) and truth["seeds"] == 1
+    assert np.isnan(truth["diversity"]) and floor["diversity"] > 0 and still["diversity"] == 0
+    for name in ("hellinger", "hellinger_elbows", "hellinger_all"):
+        assert floor[name] < mismatched[name] < still[name]
+        assert floor[f"{name}_sd"] >= 0  # two draws: a spread
+    assert still["acceleration"] == 0 and np.isnan(still["lead_error"])
+    for name in ("accent_hits", "nods"):  # higher is better
+        assert floor[name] > mismatched[name] >= still[name]
+    assert floor["lead_error"] < mismatched["lead_error"]
+    assert abs(floor["lead"] - 0.2) < abs(mismatched["lead"] - 0.2)
+    assert abs(floor["ratio"] - truth["ratio"]) < abs(mismatched["ratio"] - truth["ratio"])
+
+
+def test_the_table_round_trips_with_empty_cells_for_undefined_measures(tmp_path):
+    row = {"seeds": 2, **{name: 0.5 for name in METRICS}, **{f"{n}_sd": 0.1 for n in METRICS}}
+    row["lead"] = np.nan
+    path = write_table({"a": row, "b": {**row, "jerk": 3.25}}, tmp_path / "metrics.csv")
+    with open(path) as file:
+        lines = list(csv.reader(file))
+    assert lines[0][:4] == ["system", "seeds", "hellinger", "hellinger_sd"]
+    assert lines[1][lines[0].index("lead")] == ""
+    table = read_table(path)
+    assert table["b"]["jerk"] == 3.25 and table["a"]["seeds"] == 2 and np.isnan(table["a"]["lead"])
+
+
+def test_evaluate_writes_the_table_models_and_figures(tmp_path, moglow_run, tiny_data):
+    out = tmp_path / "evaluation"
+    arguments = ["evaluate", str(moglow_run), "--out", str(out), "--quick", "--data"]
+    assert main([*arguments, str(tiny_data), "--samples", "2", "--cache", str(tmp_path)]) == 0
+    table = read_table(out / "metrics.csv")
+    assert list(table) == [*REFERENCES, "moglow"]
+    assert table["ground_truth"]["hellinger"] == 0 and table["moglow"]["seeds"] == 1
+    assert np.isfinite(table["moglow"]["fgd"]) and table["floor"]["fgd"] < table["mean_pose"]["fgd"]
+    with open(out / "models.csv") as file:
+        models = list(csv.DictReader(file))
+    assert models[0]["system"] == "moglow" and int(models[0]["parameters"]) > 1000
+    for picture in ("speeds", "mean_pose_distance", "speaking_listening", "overlays"):
+        assert (out / f"{picture}.png").stat().st_size > 1000
+
+
+def test_evaluate_refuses_what_it_cannot_score(tmp_path, moglow_run, tiny_data, capsys):
+    out = str(tmp_path / "out")
+    assert main(["evaluate", str(tmp_path / "nothing"), "--out", out]) == 2
+    assert "is not a run folder" in capsys.readouterr().err
+    floor = tmp_path / "floor"
+    floor.symlink_to(moglow_run, target_is_directory=True)
+    assert main(["evaluate", str(floor), "--out", out, "--data", str(tiny_data)]) == 2
+    assert "two rows would be called 'floor'" in capsys.readouterr().err

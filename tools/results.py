@@ -1,0 +1,104 @@
+"""The course's final table: every model from several seeds against the references, into the README.
+
+Trains every generating model of the course (full mode unless ``--quick``) from ``--seeds``
+seeds through the shared load-or-train cache (``checkpoints/``: the chapters' runs are reused,
+and an interrupted run resumes), evaluates them with the references on the held-out
+conversations (:func:`gesturelib.evaluation.table.evaluate_models`, 3 samples each), writes
+``metrics.csv``, ``models.csv`` and the figures to ``outputs/results/`` (``outputs/results-quick/``
+in quick mode), and, in full mode, the table between the README's ``results`` markers.
+
+Usage::
+
+    .venv/bin/python tools/results.py [--seeds 3] [--quick]      # or: make results
+    .venv/bin/python tools/results.py --models moglow cvae &     # share the training between
+    .venv/bin/python tools/results.py --models aud2pose flowvae  # cores, then run it without
+
+Training every model from three seeds takes about an hour on one core; later calls reuse them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from data_synth import load_dataset
+from gesturelib.evaluation import report
+from gesturelib.evaluation.fgd import feature_network
+from gesturelib.evaluation.table import evaluate_models
+from gesturelib.recipes import trained
+from gesturelib.runtime import course_data
+
+REPO = Path(__file__).resolve().parents[1]
+#: The generating models of the course, in the order of the chapters.
+MODELS = ("aud2pose", "aud2repr2pose", "cvae", "moglow", "flowvae", "flowvae_elbo")
+MARKERS = ("<!-- results:start -->", "<!-- results:end -->")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=3, help="training seeds per model")
+    parser.add_argument("--samples", type=int, default=3, help="samples per conversation")
+    parser.add_argument("--quick", action="store_true", help="quick data and models")
+    parser.add_argument(
+        "--models",
+        nargs="+",
+        choices=MODELS,
+        default=MODELS,
+        help="train only these (e.g. to share the work between processes); evaluate only if all",
+    )
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+
+    splits = load_dataset(course_data(args.quick))
+    cache = REPO / "checkpoints"
+
+    started = time.perf_counter()
+    models, histories = {}, {}
+    for name in args.models:
+        for seed in range(args.seeds):
+            print(f"{name}, seed {seed} ...", flush=True)
+            model, history, normaliser = trained(name, splits, args.quick, cache, seed=seed)
+            models.setdefault(name, []).append((model, normaliser))
+            histories.setdefault(name, []).append((model, history))
+    print(f"Models ready after {(time.perf_counter() - started) / 60:.1f} min")
+    if set(args.models) != set(MODELS):
+        return 0
+
+    features = feature_network(
+        [c.positions for c in splits["train"]],
+        [c.positions for c in splits["val"]],
+        cache,
+        quick=args.quick,
+    )
+    rows, draws = evaluate_models(models, splits, args.samples, features)
+
+    out = REPO / "outputs" / ("results-quick" if args.quick else "results")
+    out.mkdir(parents=True, exist_ok=True)
+    model_rows = report.models_table(histories)
+    report.write_table(rows, out / "metrics.csv")
+    report.write_models(model_rows, out / "models.csv")
+    report.write_figures(draws, splits, out)
+    table = report.markdown_table(rows, model_rows)
+    print(table)
+    if not args.quick:
+        readme = REPO / "README.md"
+        text = readme.read_text()
+        pattern = re.escape(MARKERS[0]) + ".*?" + re.escape(MARKERS[1])
+        if not re.search(pattern, text, flags=re.S):
+            print(f"README.md has no {MARKERS[0]} ... {MARKERS[1]} markers", file=sys.stderr)
+            return 1
+        readme.write_text(
+            re.sub(pattern, lambda _: f"{MARKERS[0]}\n{table}\n{MARKERS[1]}", text, flags=re.S)
+        )
+        print("README.md's table updated")
+    print(f"Done in {(time.perf_counter() - started) / 60:.1f} min; files in {out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
