@@ -37,28 +37,31 @@ def plot_speed_histograms(motions: dict, truth) -> plt.Figure:
     return fig
 
 
+#: The keypoints whose distance from the mean pose :func:`plot_mean_pose_distance` shows.
+MOVING_KEYPOINTS = ("left_elbow", "left_wrist", "right_elbow", "right_wrist", "nose")
+
+
 def plot_mean_pose_distance(motions: dict, mean_pose: np.ndarray) -> plt.Figure:
-    """Box plots per keypoint of the distance from ``mean_pose`` ``(9, 3)``, one box per system."""
-    joints = range(len(KEYPOINTS))
+    """Box plots of each moving keypoint's distance from ``mean_pose`` ``(9, 3)``: one panel per
+    keypoint, one box per system (Taylor et al. 2021, Figure 6)."""
     names = list(motions)
-    fig, ax = plt.subplots(figsize=(10, 3.6))
-    width = 0.8 / len(names)
-    for s, name in enumerate(names):
-        distances = np.concatenate([distance_from_mean_pose(m, mean_pose) for m in motions[name]])
-        positions = np.arange(len(joints)) + (s - (len(names) - 1) / 2) * width
+    distances = {
+        name: np.concatenate([distance_from_mean_pose(m, mean_pose) for m in motion])
+        for name, motion in motions.items()
+    }
+    fig, axes = plt.subplots(
+        1, len(MOVING_KEYPOINTS), figsize=(2.3 * len(MOVING_KEYPOINTS), 3.6), sharey=True
+    )
+    for ax, keypoint in zip(axes, MOVING_KEYPOINTS, strict=True):
+        joint = KEYPOINTS.index(keypoint)
         box = ax.boxplot(
-            [distances[:, j] for j in joints],
-            positions=positions,
-            widths=width * 0.9,
-            showfliers=False,
-            patch_artist=True,
+            [distances[name][:, joint] for name in names], showfliers=False, patch_artist=True
         )
-        for patch in box["boxes"]:
-            patch.set_facecolor(f"C{s}")
-        ax.plot([], [], color=f"C{s}", linewidth=6, label=name)
-    ax.set_xticks(range(len(joints)), [KEYPOINTS[j].replace("_", " ") for j in joints], fontsize=8)
-    ax.set(ylabel="distance from the mean pose (cm)")
-    ax.legend(fontsize=8, ncol=len(names))
+        for s, patch in enumerate(box["boxes"]):
+            patch.set_facecolor(f"C{s % 10}")
+        ax.set_xticks(range(1, len(names) + 1), names, rotation=60, ha="right", fontsize=7)
+        ax.set_title(keypoint.replace("_", " "), fontsize=9)
+    axes[0].set_ylabel("distance from the mean pose (cm)")
     fig.tight_layout()
     return fig
 
@@ -67,7 +70,7 @@ def plot_speaking_listening(motions: dict, conversations, mean_pose: np.ndarray)
     """Box plots of how fast the keypoints move towards or away from ``mean_pose`` (the size of
     the change of their distance from it, cm/s, mean over keypoints), while the agent speaks and
     while it listens, per system (Taylor et al., Figure 8)."""
-    fig, ax = plt.subplots(figsize=(7, 3.4))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.7 * len(motions)), 3.6))
     for s, motion in enumerate(motions.values()):
         for m, mode in enumerate(("speaking", "listening")):
             rates = np.concatenate(
@@ -83,9 +86,13 @@ def plot_speaking_listening(motions: dict, conversations, mean_pose: np.ndarray)
             box = ax.boxplot(
                 [rates], positions=[3 * s + m], widths=0.8, showfliers=False, patch_artist=True
             )
-            box["boxes"][0].set(facecolor=f"C{s}", alpha=1.0 if m == 0 else 0.45)
+            box["boxes"][0].set(facecolor=f"C{s % 10}", alpha=1.0 if m == 0 else 0.45)
     ax.set_xticks(
-        [3 * s + 0.5 for s in range(len(motions))], list(motions), fontsize=8, rotation=20
+        [3 * s + 0.5 for s in range(len(motions))],
+        list(motions),
+        fontsize=7,
+        rotation=35,
+        ha="right",
     )
     ax.set(ylabel="|change of distance\nfrom the mean pose| (cm/s)")
     ax.set_title("each system: speaking (dark), listening (light)", fontsize=9)
@@ -95,13 +102,19 @@ def plot_speaking_listening(motions: dict, conversations, mean_pose: np.ndarray)
 
 def plot_overlays(motions: dict, seconds: float = 10.0, every_s: float = 1.0) -> plt.Figure:
     """Each system's pose once every ``every_s`` over the first ``seconds`` of the first
-    conversation, overlaid (front view): where its hands go, at a glance."""
+    conversation, overlaid (front view): where its hands go, at a glance. Six panels a row."""
     from gesturelib import viz
 
-    fig, axes = plt.subplots(1, len(motions), figsize=(2.4 * len(motions), 2.8), squeeze=False)
-    for ax, (name, motion) in zip(axes[0], motions.items(), strict=True):
+    columns = min(6, len(motions))
+    rows = -(-len(motions) // columns)
+    fig, axes = plt.subplots(
+        rows, columns, figsize=(2.2 * columns, 2.5 * rows), squeeze=False, sharex=True, sharey=True
+    )
+    for ax, (name, motion) in zip(axes.flat, motions.items(), strict=False):  # spare panels
         poses = motion[0][: int(seconds * FPS) : int(every_s * FPS)]
         viz.plot_pose(poses, views=("front",), axes=[ax], alpha=0.35)
         ax.set_title(name, fontsize=9)
+    for ax in axes.flat[len(motions) :]:
+        ax.axis("off")
     fig.tight_layout()
     return fig
