@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
 import sys
 import time
@@ -109,7 +110,7 @@ def run_train(args) -> Path:
         "model": args.model,
         "model_class": type(model).__name__,
         "quick": quick,
-        "data": str(data),
+        "data": str(data.resolve()),
         "seed": args.seed,
         "epochs": history.epochs,
         "best_epoch": history.best_epoch,
@@ -336,6 +337,10 @@ def _run_groups(folders: list[Path]) -> dict[str, list]:
     from gesturelib.history import History
     from gesturelib.train import EXECUTION_FIELDS
 
+    resolved = [Path(folder).resolve() for folder in folders]
+    repeated = {str(f) for f in resolved if resolved.count(f) > 1}
+    if repeated:
+        raise CommandError(f"a run folder is given twice: {', '.join(sorted(repeated))}")
     groups: dict[str, list] = {}
     for folder in folders:
         model, normaliser, checkpoint = load_run(folder)
@@ -368,12 +373,10 @@ def _run_groups(folders: list[Path]) -> dict[str, list]:
 
 
 def _common_name(names: list[str], model) -> str:
-    """The row name of runs from several seeds: their folders' common prefix (``moglow-1``,
-    ``moglow-2``: ``moglow``), else the model's class."""
-    import os
-
-    prefix = os.path.commonprefix(names).rstrip("-_ .0123456789")
-    return prefix or type(model).__name__
+    """The row name of runs from several seeds: their folders' name without a trailing seed
+    number (``moglow-1``, ``moglow-2``: ``moglow``) where they share it, else the model's class."""
+    stems = {re.sub(r"[-_.]?\d+$", "", name) for name in names}
+    return stems.pop() if len(stems) == 1 and "" not in stems else type(model).__name__
 
 
 def _evaluation_data(args, quick: bool, groups: dict) -> Path:
@@ -394,8 +397,11 @@ def _evaluation_data(args, quick: bool, groups: dict) -> Path:
             f"the runs were trained on different data ({', '.join(sorted(trained_on))}); "
             "choose one with --data"
         )
-    if trained_on and Path(next(iter(trained_on))).is_dir():
-        return Path(next(iter(trained_on)))
+    if trained_on:
+        data = Path(trained_on.pop())
+        if not data.is_dir():
+            raise CommandError(f"the runs were trained on {data}, which is gone; give --data")
+        return data
     return course_data(quick)
 
 

@@ -15,6 +15,8 @@ from gesturelib.evaluation.rules import (
     head_pitch,
     kinematic_beats,
     nod_times,
+    on_rule_nods,
+    on_rule_strokes,
     partner_nods,
     rule_measures,
     stroke_times,
@@ -100,6 +102,8 @@ def test_accent_leads_measure_each_accent_against_the_rule():
     conversation.positions = positions
     scores = rule_measures([conversation], [positions])
     assert scores["accent_hits"] == pytest.approx(0.5)
+    np.testing.assert_array_equal(on_rule_strokes(conversation, positions), [True, True, False])
+    assert scores["stroke_precision"] == pytest.approx(2 / 3)
     assert scores["lead_error"] == pytest.approx(0.0, abs=1e-9)  # median of 0, 0, 0.52
     assert np.isnan(scores["nods"]) and np.isnan(scores["beat_align"])  # nothing to answer
 
@@ -115,6 +119,10 @@ def test_listening_nods_count_only_in_the_rules_window():
     answered = partner_nods(conversation, with_nods([on_time, late], 250))
     np.testing.assert_array_equal(answered, [True, False])
     assert not partner_nods(conversation, still_pose(250)).any()
+    # The nod on time is in a rule's window, the late one in none (no accents, no "mm-hm").
+    np.testing.assert_array_equal(
+        on_rule_nods(conversation, with_nods([on_time, late], 250)), [True, False]
+    )
 
 
 def test_beat_alignment_follows_bailandos_formula():
@@ -149,6 +157,14 @@ def test_the_references_rank_as_they_must_on_the_rules():
     assert mean_pose["accent_hits"] == 0.0 and np.isnan(mean_pose["lead_error"])
     assert floor["nods"] > mismatched["nods"] and mean_pose["nods"] == 0.0
     assert floor["beat_align"] > mean_pose["beat_align"] == 0.0
+    # Jitter strikes and nods everywhere: it hits accents by chance, but its precision gives it away.
+    rng = np.random.default_rng(0)
+    jitter = rule_measures(
+        conversations,
+        [c.positions.mean(0) + rng.normal(0, 0.5, c.positions.shape) for c in conversations],
+    )
+    assert jitter["stroke_precision"] < floor["stroke_precision"] / 2
+    assert jitter["nod_precision"] < floor["nod_precision"] / 2
     events_unknown = [SimpleNamespace(**{**vars(c), "events": None}) for c in conversations]
     unknown = rule_measures(events_unknown, [c.positions for c in conversations])
     assert np.isnan(unknown["accent_hits"]) and np.isnan(unknown["nods"])

@@ -38,19 +38,72 @@ def test_the_references_rank_as_they_must(conversations):
     mean_pose = np.mean([c.positions.mean(0) for c in conversations], axis=0)
     draws = reference_draws(held_out, others, mean_pose, samples=2, seed=1)
     assert list(draws) == list(REFERENCES)
-    rows = {name: score_system(held_out, runs) for name, runs in draws.items()}
+    rows = {
+        name: score_system(held_out, runs, None, name == "mean_pose")
+        for name, runs in draws.items()
+    }
     truth, floor, mismatched, still = (rows[name] for name in REFERENCES)
     assert truth["hellinger"] == 0 and np.isnan(truth["hellinger_sd"]) and truth["seeds"] == 1
     assert np.isnan(truth["diversity"]) and floor["diversity"] > 0 and still["diversity"] == 0
     for name in ("hellinger", "hellinger_elbows", "hellinger_all"):
         assert floor[name] < mismatched[name] < still[name]
-        assert floor[f"{name}_sd"] >= 0  # two draws: a spread
+        assert floor[f"{name}_sd"] > 0  # two draws: a spread
     assert still["acceleration"] == 0 and np.isnan(still["lead_error"])
     for name in ("accent_hits", "nods"):  # higher is better
         assert floor[name] > mismatched[name] >= still[name]
     assert floor["lead_error"] < mismatched["lead_error"]
     assert abs(floor["lead"] - 0.2) < abs(mismatched["lead"] - 0.2)
     assert abs(floor["ratio"] - truth["ratio"]) < abs(mismatched["ratio"] - truth["ratio"])
+
+
+def test_a_row_is_the_mean_and_spread_over_every_draw_of_every_run(monkeypatch):
+    from gesturelib.evaluation import table
+
+    values = iter([1.0, 2.0, 6.0, 5.0])
+    monkeypatch.setattr(
+        table, "score_draw", lambda *_: dict.fromkeys(METRICS, next(values)) | {"lead": 0.5}
+    )
+    motion = np.zeros((10, 9, 3))
+    runs = [[motion, motion + 1.0], [motion, motion + 3.0]]  # 2 seeds, 2 samples each
+    row = score_system([None], [[[m] for m in run] for run in runs])
+    assert row["seeds"] == 2 and row["hellinger"] == pytest.approx(3.5)
+    assert row["hellinger_sd"] == pytest.approx(np.std([1, 2, 6, 5], ddof=1))
+    assert row["lead"] == 0.5 and row["lead_sd"] == 0.0
+    # Diversity, one value per run (1 cm and 3 cm apart at every keypoint... along x, y, z):
+    assert row["diversity"] == pytest.approx(2 * np.sqrt(3))
+    assert row["diversity_sd"] == pytest.approx(np.std([np.sqrt(3), 3 * np.sqrt(3)], ddof=1))
+    values = iter([1.0, np.nan])
+    row = score_system([None], [[[motion]], [[motion]]], deterministic=True)
+    assert np.isnan(row["hellinger"]) and row["diversity"] == 0.0  # undefined once: undefined
+
+
+def test_runs_of_several_seeds_share_a_row_named_by_their_folders():
+    from gesturelib.cli import _common_name
+
+    class MoGlow:
+        pass
+
+    assert _common_name(["moglow-1", "moglow-2"], MoGlow()) == "moglow"
+    assert _common_name(["flowvae_v2-0", "flowvae_v2_1"], MoGlow()) == "flowvae_v2"
+    assert _common_name(["first", "second"], MoGlow()) == "MoGlow"
+
+
+def test_models_table_counts_parameters_and_training_time():
+    from torch import nn
+
+    from gesturelib.evaluation.report import models_table
+    from gesturelib.history import History
+
+    def history(seconds):
+        record = History()
+        record.epoch_seconds = list(seconds)
+        return record
+
+    model = nn.Linear(3, 2)  # 8 parameters
+    rows = models_table({"tiny": [(model, history([60, 60])), (model, history([120, 120]))]})
+    assert rows["tiny"]["parameters"] == 8 and rows["tiny"]["seeds"] == 2
+    assert rows["tiny"]["training_minutes"] == pytest.approx(3.0)
+    assert rows["tiny"]["training_minutes_sd"] == pytest.approx(np.std([2, 4], ddof=1))
 
 
 def test_the_table_round_trips_with_empty_cells_for_undefined_measures(tmp_path):
@@ -88,3 +141,5 @@ def test_evaluate_refuses_what_it_cannot_score(tmp_path, moglow_run, tiny_data, 
     floor.symlink_to(moglow_run, target_is_directory=True)
     assert main(["evaluate", str(floor), "--out", out, "--data", str(tiny_data)]) == 2
     assert "two rows would be called 'floor'" in capsys.readouterr().err
+    assert main(["evaluate", str(moglow_run), str(moglow_run), "--out", out]) == 2
+    assert "given twice" in capsys.readouterr().err

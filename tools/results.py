@@ -52,6 +52,12 @@ def main() -> int:
         help="train only these (e.g. to share the work between processes); evaluate only if all",
     )
     args = parser.parse_args()
+    if args.seeds < 1 or args.samples < 1:
+        parser.error("--seeds and --samples must be at least 1")
+    readme = REPO / "README.md"
+    pattern = re.escape(MARKERS[0]) + ".*?" + re.escape(MARKERS[1])
+    if not args.quick and not re.search(pattern, readme.read_text(), flags=re.S):
+        parser.error(f"README.md has no {MARKERS[0]} ... {MARKERS[1]} markers for the table")
     torch.set_num_threads(1)
 
     splits = load_dataset(course_data(args.quick))
@@ -86,12 +92,7 @@ def main() -> int:
     table = report.markdown_table(rows, model_rows)
     print(table)
     if not args.quick:
-        readme = REPO / "README.md"
         text = readme.read_text()
-        pattern = re.escape(MARKERS[0]) + ".*?" + re.escape(MARKERS[1])
-        if not re.search(pattern, text, flags=re.S):
-            print(f"README.md has no {MARKERS[0]} ... {MARKERS[1]} markers", file=sys.stderr)
-            return 1
         readme.write_text(
             re.sub(pattern, lambda _: f"{MARKERS[0]}\n{table}\n{MARKERS[1]}", text, flags=re.S)
         )

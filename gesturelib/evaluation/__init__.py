@@ -2,7 +2,14 @@
 
 * :mod:`~gesturelib.evaluation.headline`: the course's headline measures (wrist-speed
   Hellinger distance, speaking/listening ratio, stroke lead), the references every model is
-  compared with, and generation for held-out conversations.
+  compared with, and generation for held-out conversations (exported here);
+* :mod:`~gesturelib.evaluation.rules`: appropriateness against the generator's event log, and
+  Bailando's beat alignment;
+* :mod:`~gesturelib.evaluation.fgd`: the Fréchet gesture distance and its feature network;
+* :mod:`~gesturelib.evaluation.table`: every system scored into one table with spreads
+  (``evaluate_models``);
+* :mod:`~gesturelib.evaluation.report` and :mod:`~gesturelib.evaluation.figures`: the files and
+  pictures an evaluation writes.
 """
 
 from gesturelib.evaluation.headline import (

@@ -31,10 +31,20 @@ def wrist_speeds(positions: np.ndarray, fps: int = FPS) -> np.ndarray:
     return speed(positions, fps)[:, list(JOINT_GROUPS["wrists"])]
 
 
+def joint_speed_histogram(
+    motions: Sequence[np.ndarray], group: str = "wrists", fps: int = FPS
+) -> np.ndarray:
+    """The normalised histogram (:data:`WRIST_SPEED_BINS`) of the speeds of a joint group of
+    :data:`gesturelib.metrics.JOINT_GROUPS`, pooled over the joints and all frames of
+    ``motions``."""
+    joints = list(JOINT_GROUPS[group])
+    speeds = np.concatenate([speed(m, fps)[:, joints].ravel() for m in motions])
+    return speed_histogram(speeds, WRIST_SPEED_BINS)
+
+
 def wrist_speed_histogram(motions: Sequence[np.ndarray], fps: int = FPS) -> np.ndarray:
     """The normalised histogram of both wrists' speeds over all frames of ``motions``."""
-    speeds = np.concatenate([wrist_speeds(m, fps).ravel() for m in motions])
-    return speed_histogram(speeds, WRIST_SPEED_BINS)
+    return joint_speed_histogram(motions, "wrists", fps)
 
 
 def wrist_speed_hellinger(

@@ -119,12 +119,13 @@ def write_figures(draws: dict, splits, folder: str | Path) -> list[Path]:
 #: The README's columns: (heading, metrics.csv column, digits).
 README_COLUMNS = (
     ("wrist-speed Hellinger ↓", "hellinger", 3),
-    ("FGD ↓", "fgd", 1),
+    ("FGD ↓", "fgd", 0),
     ("jerk (cm/s³)", "jerk", 0),
     ("speak/listen", "ratio", 2),
     ("accents hit ↑", "accent_hits", 2),
+    ("stroke precision", "stroke_precision", 2),
     ("lead error (s) ↓", "lead_error", 3),
-    ("nods ↑", "nods", 2),
+    ("nods", "nods", 2),
 )
 
 

@@ -13,6 +13,12 @@ below detects events in motion alone, from keypoints, and checks them against th
 * :func:`partner_nods`: for each end of a partner's phrase that the agent answers with silence,
   whether the head nods (a peak of downward head pitch speed, :func:`nod_times`) when the rule
   says a listening nod comes. Their mean is the **nod response**.
+* Hit rates alone reward motion that strikes and nods all the time (jitter does), so each comes
+  with a **precision**: the share of the strokes found that lie on a rule's time
+  (:func:`on_rule_strokes`), of the nods found that lie in a rule's window (:func:`on_rule_nods`:
+  after the partner's phrases, on the agent's accents and with its own "mm-hm"). Natural motion
+  has more speed peaks than strokes (preparations, retractions): compare a system's precision
+  with the ground truth's, not with 1.
 * :func:`beat_alignment`: Bailando's beat-alignment score (Li et al. 2022, their code), the
   field's proxy: how close *kinematic beats* (local minima of the joints' mean speed) come to
   onsets of the audio. It needs no events, so it applies to any data, but it knows nothing of
@@ -71,7 +77,9 @@ def nod_times(positions: np.ndarray, fps: int = FPS) -> np.ndarray:
     """Times ``(N,)`` of the nods in keypoints ``(T, 9, 3)``: peaks of the head's downward pitch
     speed above :data:`NOD_MIN_SPEED_DEG`, at least 0.2 s apart."""
     down = np.degrees(np.diff(head_pitch(positions))) * fps
-    peaks, _ = find_peaks(down, height=NOD_MIN_SPEED_DEG, distance=max(1, fps // 5))
+    peaks, _ = find_peaks(
+        down, height=NOD_MIN_SPEED_DEG, prominence=NOD_MIN_SPEED_DEG, distance=max(1, fps // 5)
+    )
     return (peaks + 1) / fps
 
 
@@ -96,35 +104,75 @@ def accent_leads(conversation, positions: np.ndarray) -> np.ndarray:
     return np.asarray(leads, dtype=np.float64)
 
 
-def partner_nods(conversation, positions: np.ndarray) -> np.ndarray:
-    """For each phrase end of the partner that the rules answer with a listening nod (the agent
-    silent for the next ``LISTENING_WINDOW_S``), whether ``positions`` nod in the rule's window:
-    ``nod_delay_s`` after the end plus a quarter of the agent's nod cycle, within
-    :data:`NOD_TOLERANCE_S`.
+def on_rule_strokes(conversation, positions: np.ndarray) -> np.ndarray:
+    """For each stroke found in ``positions`` (:func:`stroke_times`), whether it lies within
+    :data:`STROKE_TOLERANCE_S` of the rule's time for one of the agent's accents: ``(S,)`` bool."""
+    strokes = stroke_times(positions, conversation.fps)
+    rule = conversation.config.motion.stroke_lead_s
+    targets = np.array([a.time - rule for a in conversation.events.accents_of("A")])
+    if targets.size == 0:
+        return np.zeros(strokes.size, dtype=bool)
+    return np.abs(strokes[:, None] - targets[None]).min(axis=1) <= STROKE_TOLERANCE_S
 
-    Returns:
-        ``(E,)`` bool, one per such phrase end (the generator nods at
-        ``listening_nod_probability`` of them).
+
+def nod_windows(conversation) -> dict[str, np.ndarray]:
+    """Where the rules put the agent's nods, as ``(W, 2)`` arrays of ``[start, end]`` times (the
+    time of fastest downward motion, widened by :data:`NOD_TOLERANCE_S`), by cause:
+
+    * ``partner``: after each phrase end of the partner that the agent answers with silence
+      (for the next ``LISTENING_WINDOW_S``): ``nod_delay_s`` plus a quarter of the nod cycle;
+    * ``accent``: ``stroke_lead_s`` before each of the agent's accents (with a chance that grows
+      with the accent's emphasis);
+    * ``backchannel``: a quarter cycle after the start of each of the agent's own "mm-hm".
     """
     from data_synth.nods import LISTENING_WINDOW_S
 
     motion = conversation.config.motion
     quarter_cycle = motion.nod_duration_s / conversation.style.speed / 4
     earliest, latest = (d + quarter_cycle for d in motion.nod_delay_s)
-    nods = nod_times(positions, conversation.fps)
     agent = conversation.events.phrases_of("A", kind=None)
-    answered = []
-    for phrase in conversation.events.phrases_of("B"):
-        end = phrase.end
-        if any(u.start < end + LISTENING_WINDOW_S and u.end > end for u in agent):
-            continue
-        after = nods - end
-        answered.append(
-            bool(
-                np.any((after >= earliest - NOD_TOLERANCE_S) & (after <= latest + NOD_TOLERANCE_S))
-            )
+    ends = [
+        p.end
+        for p in conversation.events.phrases_of("B")
+        if not any(u.start < p.end + LISTENING_WINDOW_S and u.end > p.end for u in agent)
+    ]
+    accents = [a.time - motion.stroke_lead_s for a in conversation.events.accents_of("A")]
+    backchannels = [u.start + quarter_cycle for u in agent if u.kind == "backchannel"]
+    tolerance = NOD_TOLERANCE_S
+
+    def windows(starts, first, last):
+        return np.array([[t + first - tolerance, t + last + tolerance] for t in starts]).reshape(
+            -1, 2
         )
-    return np.asarray(answered, dtype=bool)
+
+    return {
+        "partner": windows(ends, earliest, latest),
+        "accent": windows(accents, 0.0, 0.0),
+        "backchannel": windows(backchannels, 0.0, 0.0),
+    }
+
+
+def partner_nods(conversation, positions: np.ndarray) -> np.ndarray:
+    """For each phrase end of the partner that the rules answer with a listening nod
+    (:func:`nod_windows`' ``partner``), whether ``positions`` nod in its window: ``(E,)`` bool
+    (the generator nods at ``listening_nod_probability`` of them)."""
+    nods = nod_times(positions, conversation.fps)
+    return np.array(
+        [
+            np.any((nods >= start) & (nods <= end))
+            for start, end in nod_windows(conversation)["partner"]
+        ],
+        dtype=bool,
+    )
+
+
+def on_rule_nods(conversation, positions: np.ndarray) -> np.ndarray:
+    """For each nod found in ``positions`` (:func:`nod_times`), whether it lies in a window where
+    the rules put a nod (:func:`nod_windows`, every cause): ``(N,)`` bool."""
+    nods = nod_times(positions, conversation.fps)
+    windows = np.concatenate(list(nod_windows(conversation).values()))
+    inside = (nods[:, None] >= windows[None, :, 0]) & (nods[:, None] <= windows[None, :, 1])
+    return inside.any(axis=1)
 
 
 def kinematic_beats(positions: np.ndarray, fps: int = FPS) -> np.ndarray:
@@ -173,20 +221,20 @@ def rule_measures(conversations, motions) -> dict[str, float]:
 
     Returns:
         ``accent_hits`` (fraction of the agent's accents with a stroke on the rule's time),
+        ``stroke_precision`` (fraction of the strokes found that are on a rule's time),
         ``lead_error`` (median seconds between a found stroke's lead and the rule's), ``nods``
-        (fraction of the partner's phrase ends answered by a nod in the rule's window) and
+        (fraction of the partner's phrase ends answered by a nod in the rule's window),
+        ``nod_precision`` (fraction of the nods found that are in a rule's window) and
         ``beat_align`` (Bailando's score, mean over conversations). Measures that need the
         generator's events are NaN for conversations without them (``events`` None); so is
-        ``lead_error`` for motion without any stroke near an accent.
+        ``lead_error`` for motion without any stroke near an accent, and a precision for motion
+        in which no stroke or nod is found.
     """
-    beat = float(
-        np.mean([beat_alignment(c, m) for c, m in zip(conversations, motions, strict=True)])
-    )
+    pairs = list(zip(conversations, motions, strict=True))
+    beat = float(np.mean([beat_alignment(c, m) for c, m in pairs]))
     if any(getattr(c, "events", None) is None for c in conversations):
-        return {"accent_hits": np.nan, "lead_error": np.nan, "nods": np.nan, "beat_align": beat}
-    leads = np.concatenate(
-        [accent_leads(c, m) for c, m in zip(conversations, motions, strict=True)]
-    )
+        return {name: np.nan for name in RULE_MEASURES} | {"beat_align": beat}
+    leads = np.concatenate([accent_leads(c, m) for c, m in pairs])
     rules = np.concatenate(
         [
             np.full(len(c.events.accents_of("A")), c.config.motion.stroke_lead_s)
@@ -194,13 +242,30 @@ def rule_measures(conversations, motions) -> dict[str, float]:
         ]
     )
     error = np.abs(leads - rules)
-    answered = np.concatenate(
-        [partner_nods(c, m) for c, m in zip(conversations, motions, strict=True)]
-    )
     missed = np.nan_to_num(error, nan=np.inf)  # an accent without a stroke near it misses
+    answered = np.concatenate([partner_nods(c, m) for c, m in pairs])
+    strokes = np.concatenate([on_rule_strokes(c, m) for c, m in pairs])
+    nods = np.concatenate([on_rule_nods(c, m) for c, m in pairs])
     return {
         "accent_hits": float(np.mean(missed <= STROKE_TOLERANCE_S)) if error.size else np.nan,
+        "stroke_precision": _share(strokes),
         "lead_error": float(np.nanmedian(error)) if np.isfinite(missed).any() else np.nan,
-        "nods": float(answered.mean()) if answered.size else np.nan,
+        "nods": _share(answered),
+        "nod_precision": _share(nods),
         "beat_align": beat,
     }
+
+
+#: What :func:`rule_measures` returns, in order.
+RULE_MEASURES = (
+    "accent_hits",
+    "stroke_precision",
+    "lead_error",
+    "nods",
+    "nod_precision",
+    "beat_align",
+)
+
+
+def _share(flags: np.ndarray) -> float:
+    return float(flags.mean()) if flags.size else np.nan

@@ -27,8 +27,8 @@ import numpy as np
 
 from gesturelib.conventions import FPS
 from gesturelib.evaluation.headline import (
-    WRIST_SPEED_BINS,
     headline_measures,
+    joint_speed_histogram,
     reference_motions,
 )
 from gesturelib.evaluation.rules import rule_measures
@@ -37,8 +37,6 @@ from gesturelib.metrics import (
     acceleration,
     hellinger_distance,
     jerk,
-    speed,
-    speed_histogram,
 )
 
 #: The table's measures, in column order, with what they say (the README lists them).
@@ -53,8 +51,10 @@ METRICS: dict[str, str] = {
     "ratio": "wrist speed while speaking over wrist speed while listening",
     "lead": "seconds by which wrist speed leads the speech's emphasis (the rule: 0.2)",
     "accent_hits": "fraction of the agent's accents with a stroke on the rule's time",
+    "stroke_precision": "fraction of the strokes found that are on a rule's time",
     "lead_error": "median seconds between a stroke's lead over its accent and the rule's",
     "nods": "fraction of the partner's phrase ends answered by a nod when the rule says",
+    "nod_precision": "fraction of the nods found that are in a rule's window",
     "beat_align": "Bailando's beat-alignment score against speech onsets (the field's proxy)",
 }
 
@@ -77,7 +77,7 @@ def score_draw(conversations, motions: Sequence[np.ndarray], features=None) -> d
     scores = headline_measures(conversations, motions)
     for group in ("elbows", "all"):
         scores[f"hellinger_{group}"] = hellinger_distance(
-            _speed_histogram(motions, group), _speed_histogram(truth, group)
+            joint_speed_histogram(motions, group), joint_speed_histogram(truth, group)
         )
     wrists = list(JOINT_GROUPS["wrists"])
     scores["acceleration"] = _pooled_mean(acceleration, motions, wrists)
@@ -102,28 +102,30 @@ def diversity(samples: Sequence[Sequence[np.ndarray]]) -> float:
     return float(np.mean(distances))
 
 
-def score_system(conversations, runs: Draws, features=None) -> dict[str, float]:
-    """One row of the table: each measure's mean over the draws of every run, its standard
-    deviation (``<name>_sd``; NaN for a single draw) and ``seeds``, the number of runs."""
-    draws = []
-    for run in runs:
-        spread = diversity(run)
-        draws += [
-            {**score_draw(conversations, sample, features), "diversity": spread} for sample in run
-        ]
+def score_system(conversations, runs: Draws, features=None, deterministic=False) -> dict:
+    """One row of the table: each measure's mean over the draws of every run and its standard
+    deviation (``<name>_sd``), and ``seeds``, the number of runs. A measure undefined for any draw
+    is NaN (empty in the table), and so is a spread over a single value.
+
+    Diversity is a property of a run's samples together: one value per run, its spread over runs.
+    ``deterministic``: the system gives one motion per conversation whatever is drawn (a run is
+    one draw), so its diversity is 0.
+    """
+    draws = [score_draw(conversations, sample, features) for run in runs for sample in run]
+    spreads = [0.0 if deterministic else diversity(run) for run in runs]
     row: dict[str, float] = {"seeds": len(runs)}
     for name in METRICS:
-        values = np.array([d[name] for d in draws], dtype=np.float64)
-        defined = values[~np.isnan(values)]
-        row[name] = float(defined.mean()) if defined.size else np.nan
-        row[f"{name}_sd"] = float(defined.std(ddof=1)) if defined.size > 1 else np.nan
+        values = np.array(spreads if name == "diversity" else [d[name] for d in draws])
+        defined = not np.isnan(values).any()
+        row[name] = float(values.mean()) if defined else np.nan
+        row[f"{name}_sd"] = float(values.std(ddof=1)) if defined and values.size > 1 else np.nan
     return row
 
 
 def model_rotations(conversations, model, normaliser, samples: int, seed: int = 0) -> list:
     """Limb rotations ``rotations[k][i]`` ``(T, 9, 6)``: sample ``k`` of the model for held-out
     conversation ``i``'s speech and who is talking (never its motion). A deterministic model
-    (``noise_dim`` 0) is run once and its motion repeated: its samples are all alike."""
+    (``noise_dim`` 0) gives one draw, whatever ``samples`` asks."""
     from gesturelib.features import mel_spectrogram
     from gesturelib.sampling import generate
 
@@ -139,7 +141,7 @@ def model_rotations(conversations, model, normaliser, samples: int, seed: int = 
         )
         for c in conversations
     ]
-    return [[rotations[k % drawn] for rotations in per_conversation] for k in range(samples)]
+    return [[rotations[k] for rotations in per_conversation] for k in range(drawn)]
 
 
 def positions_of(rotations: list, smoothed: bool = False) -> list:
@@ -184,7 +186,7 @@ def reference_draws(
         "ground_truth": [[[c.positions for c in conversations]]],
         "floor": [[d["floor"] for d in draws]],
         "mismatched": [[d["mismatched"] for d in draws]],
-        "mean_pose": [[d["mean_pose"] for d in draws]],
+        "mean_pose": [[draws[0]["mean_pose"]]],
     }
 
 
@@ -192,9 +194,11 @@ def evaluate_models(models: dict, splits, samples: int = 3, features=None) -> tu
     """Score the references and every model on a dataset's held-out (test) conversations.
 
     Args:
-        models: row name -> ``[(model, normaliser), ...]``, one per training seed. A
-            deterministic model gets a second row, ``<name>+smoothed``, of its motion after
-            Kucherenko et al.'s post-processing (:func:`positions_of`).
+        models: row name -> ``[(model, normaliser), ...]``, one per training seed (all
+            deterministic, or all not). A deterministic model gets a second row,
+            ``<name>+smoothed``, of its motion after Kucherenko et al.'s post-processing
+            (:func:`positions_of`), and the ground truth too (``ground_truth+smoothed``: what the
+            filters alone do to motion).
         splits: the dataset's ``{"train", "val", "test"}`` conversations: the training split's
             mean pose, the validation split's motion as mismatched motion.
         samples: draws per conversation of each stochastic system.
@@ -203,28 +207,41 @@ def evaluate_models(models: dict, splits, samples: int = 3, features=None) -> tu
     Returns:
         ``(rows, draws)``: :func:`score_system`'s row and the draws ``runs[r][k][i]`` of every
         system, references first.
+    Raises:
+        ValueError: for a row without runs, a row named like a reference, fewer than one sample,
+            or a row that mixes deterministic and stochastic models.
     """
+    if samples < 1:
+        raise ValueError(f"samples must be at least 1, got {samples}")
+    for name, runs in models.items():
+        if not runs:
+            raise ValueError(f"model row {name!r} has no runs")
+        if name in REFERENCES or name.endswith("+smoothed"):
+            raise ValueError(
+                f"{name!r} is a reference's or a smoothed row's name; rename the model"
+            )
+        if len({model.noise_dim == 0 for model, _ in runs}) > 1:
+            raise ValueError(f"model row {name!r} mixes deterministic and stochastic models")
     test = splits["test"]
     draws = reference_draws(test, splits["val"], mean_pose_of(splits["train"]), samples)
+    fixed = {"mean_pose"}
+    if any(runs[0][0].noise_dim == 0 for runs in models.values()):
+        draws["ground_truth+smoothed"] = [positions_of([[c.rotations for c in test]], True)]
     for name, runs in models.items():
         rotations = [
             model_rotations(test, model, normaliser, samples) for model, normaliser in runs
         ]
         draws[name] = [positions_of(r) for r in rotations]
         if runs[0][0].noise_dim == 0:
+            fixed |= {name, f"{name}+smoothed"}
             draws[f"{name}+smoothed"] = [positions_of(r, smoothed=True) for r in rotations]
-    return {name: score_system(test, runs, features) for name, runs in draws.items()}, draws
+    rows = {name: score_system(test, runs, features, name in fixed) for name, runs in draws.items()}
+    return rows, draws
 
 
 def mean_pose_of(conversations) -> np.ndarray:
     """Keypoints ``(9, 3)`` of the mean pose over every frame of ``conversations``."""
     return np.concatenate([c.positions for c in conversations]).mean(axis=0)
-
-
-def _speed_histogram(motions, group: str, fps: int = FPS) -> np.ndarray:
-    joints = list(JOINT_GROUPS[group])
-    speeds = np.concatenate([speed(m, fps)[:, joints].ravel() for m in motions])
-    return speed_histogram(speeds, WRIST_SPEED_BINS)
 
 
 def _pooled_mean(measure, motions, joints, fps: int = FPS) -> float:
