@@ -66,6 +66,37 @@ def plot_mean_pose_distance(motions: dict, mean_pose: np.ndarray) -> plt.Figure:
     return fig
 
 
+def plot_mean_pose_distance_series(
+    motions: dict, mean_pose: np.ndarray, activity: np.ndarray, seconds: float = 20.0
+) -> plt.Figure:
+    """Each moving keypoint's distance from ``mean_pose`` over the first ``seconds`` of the first
+    conversation, one panel per system, the agent's speech shaded (``activity`` ``(T,)`` of that
+    conversation) (Taylor et al. 2021, Figure 6, left)."""
+    from gesturelib import viz
+
+    frames = int(seconds * FPS)
+    times = np.arange(frames) / FPS
+    fig, axes = plt.subplots(
+        len(motions), 1, figsize=(9, 1.3 * len(motions) + 0.6), sharex=True, sharey=True
+    )
+    for ax, (name, motion) in zip(np.atleast_1d(axes), motions.items(), strict=True):
+        distance = distance_from_mean_pose(motion[0][:frames], mean_pose)
+        for k, keypoint in enumerate(MOVING_KEYPOINTS):
+            ax.plot(
+                times,
+                distance[:, KEYPOINTS.index(keypoint)],
+                lw=0.9,
+                color=f"C{k}",
+                label=keypoint.replace("_", " "),
+            )
+        viz.shade_activity(ax, activity[:frames])
+        ax.set_ylabel(name, fontsize=8, rotation=0, ha="right", va="center")
+    np.atleast_1d(axes)[0].legend(fontsize=7, ncol=len(MOVING_KEYPOINTS), loc="upper right")
+    np.atleast_1d(axes)[-1].set_xlabel("time (s); distance from the mean pose, cm")
+    fig.tight_layout()
+    return fig
+
+
 def plot_speaking_listening(motions: dict, conversations, mean_pose: np.ndarray) -> plt.Figure:
     """Box plots of how fast the keypoints move towards or away from ``mean_pose`` (the size of
     the change of their distance from it, cm/s, mean over keypoints), while the agent speaks and
