@@ -135,7 +135,8 @@ def markdown_table(metrics: dict[str, dict], models: dict[str, dict]) -> str:
     headings = ["system", *(h for h, _, _ in README_COLUMNS), "parameters", "training (min)"]
     lines = ["| " + " | ".join(headings) + " |", "|" + "---|" * len(headings)]
     for system, row in metrics.items():
-        cells = [system.replace("_", " ") if system in REFERENCES else f"`{system}`"]
+        reference = system.split("+")[0] in REFERENCES  # the ground truth smoothed, too
+        cells = [system.replace("_", " ").replace("+", ", ") if reference else f"`{system}`"]
         for _, column, digits in README_COLUMNS:
             mean, sd = row[column], row[f"{column}_sd"]
             cell = "" if np.isnan(mean) else f"{mean:.{digits}f}"
