@@ -89,11 +89,15 @@ def plot_mean_pose_distance_series(
                 color=f"C{k}",
                 label=keypoint.replace("_", " "),
             )
-        viz.shade_activity(ax, activity[:frames])
+        shading = viz.shade_activity(ax, activity[:frames])
         ax.set_ylabel(name, fontsize=8, rotation=0, ha="right", va="center")
-    np.atleast_1d(axes)[0].legend(fontsize=7, ncol=len(MOVING_KEYPOINTS), loc="upper right")
-    np.atleast_1d(axes)[-1].set_xlabel("time (s); distance from the mean pose, cm")
-    fig.tight_layout()
+    axes = np.atleast_1d(axes)
+    keypoints = axes[0].get_legend_handles_labels()
+    fig.legend(*keypoints, fontsize=7, ncol=len(MOVING_KEYPOINTS), loc="upper left")
+    fig.legend(handles=shading, fontsize=7, loc="upper right", title="who is talking")
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle("distance from the mean pose (cm)", fontsize=9, y=0.995)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
     return fig
 
 
