@@ -3,7 +3,8 @@
 Commands (``docs/architecture.md`` has the contract they share):
     train MODEL --out RUN     train a model of the course into a run folder
     generate RUN --audio WAV | --conversation STEM --out DIR
-                              the agent's motion for a recording: motion.npz and agent.mp4
+                              the agent's motion for a recording: motion.npz, agent.bvh and
+                              agent.mp4
     evaluate RUN [RUN ...] --out DIR
                               score runs and the references on held-out conversations:
                               metrics.csv, models.csv and figures
@@ -175,6 +176,7 @@ def run_generate(args) -> list[Path]:
     import numpy as np
 
     from data_synth import load_conversation
+    from gesturelib.bvh import write_bvh
     from gesturelib.conventions import FPS, Activity
     from gesturelib.features import load_audio, mel_spectrogram, num_frames, voice_activity
     from gesturelib.sampling import generate
@@ -185,17 +187,34 @@ def run_generate(args) -> list[Path]:
         raise CommandError(
             f"{args.run} holds a {type(model).__name__}, which does not generate motion"
         )
+    if args.partner is not None and args.audio is None:
+        raise CommandError("--partner goes with --audio (a conversation brings both voices)")
     if args.audio is not None:
         audio, sample_rate = load_audio(args.audio)
         if num_frames(len(audio), sample_rate, FPS) < 1:
             raise CommandError(f"{args.audio} is shorter than one frame ({1000 // FPS} ms)")
         speaking = voice_activity(audio, sample_rate)
-        if not speaking.any():
+        partner = np.zeros_like(speaking)
+        if args.partner is not None:
+            partner_audio, _ = load_audio(args.partner, sample_rate)
+            if num_frames(len(partner_audio), sample_rate, FPS) != len(speaking):
+                raise CommandError(
+                    f"{args.partner} lasts {len(partner_audio) / sample_rate:.2f} s and "
+                    f"{args.audio} {len(audio) / sample_rate:.2f} s; the partner's recording must "
+                    "have the agent's length"
+                )
+            partner = voice_activity(partner_audio, sample_rate)
+            audio = _mix(audio, partner_audio)
+        if not (speaking.any() or partner.any()):
             raise CommandError(
                 f"{args.audio} holds no speech (silent, or too quiet to tell from silence): "
                 "the agent would only rest; give a recording of speech"
             )
-        activity = np.where(speaking, Activity.A_SPEAKS, Activity.NONE)
+        activity = np.select(
+            [speaking & partner, speaking, partner],
+            [Activity.BOTH, Activity.A_SPEAKS, Activity.B_SPEAKS],
+            Activity.NONE,
+        )
     else:
         conversation = load_conversation(args.conversation)  # its motion is never read
         audio, sample_rate, activity = (
@@ -234,9 +253,21 @@ def run_generate(args) -> list[Path]:
             fps=np.int64(FPS),
         )
         written.append(folder / "motion.npz")
+        written.append(write_bvh(folder / "agent.bvh", sample))
         if not args.no_video:
             written.append(_render(positions, audio, sample_rate, folder / "agent.mp4"))
     return written
+
+
+def _mix(agent, partner):
+    """Both voices in one track ``(n,)``, as the conversations the models learned from: the sum,
+    scaled down only if it would clip (trimmed to the shorter recording)."""
+    import numpy as np
+
+    n = min(len(agent), len(partner))
+    both = agent[:n] + partner[:n]
+    peak = float(np.abs(both).max())
+    return both / peak if peak > 1.0 else both
 
 
 def _parse_style(pairs: list[str]) -> dict[str, float]:
@@ -504,6 +535,11 @@ def _parser() -> argparse.ArgumentParser:
     source = generate.add_mutually_exclusive_group(required=True)
     source.add_argument("--audio", type=Path, help="a recording of the agent's speech")
     source.add_argument("--conversation", type=Path, help="a conversation's path stem")
+    generate.add_argument(
+        "--partner",
+        type=Path,
+        help="the partner's recording, as long as the agent's (with --audio)",
+    )
     generate.add_argument("--out", required=True, type=Path, help="the output folder")
     generate.add_argument("--seed", type=_at_least(0), default=0)
     generate.add_argument("--temperature", type=float, help="default: the model's own")

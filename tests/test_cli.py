@@ -136,6 +136,32 @@ def test_generate_from_a_wav_writes_the_motion_of_every_frame(moglow_run, tmp_pa
     np.testing.assert_array_equal(np.load(again / "sample-1" / "motion.npz")["rotations"], first)
 
 
+def test_generate_hears_the_partner_and_writes_a_bvh(moglow_run, tmp_path, capsys):
+    from data_synth import generate_conversation
+    from gesturelib.conventions import Activity
+    from gesturelib.features import save_audio
+
+    samples = write_wav(tmp_path / "agent.wav", seconds=3.0)
+    partner = generate_conversation(5.0, seed=9).audio[:samples]
+    partner[: samples // 2] = 0.0  # the partner speaks in the second half only
+    save_audio(tmp_path / "partner.wav", partner, 16_000)
+    out = tmp_path / "out"
+    args = ["generate", str(moglow_run), "--audio", str(tmp_path / "agent.wav"), "--out", str(out)]
+    assert main([*args, "--partner", str(tmp_path / "partner.wav"), "--no-video"]) == 0
+    activity = np.load(out / "motion.npz")["activity"]
+    assert {Activity.B_SPEAKS, Activity.BOTH} & set(activity[len(activity) // 2 :].tolist())
+    assert not {Activity.B_SPEAKS, Activity.BOTH} & set(activity[: len(activity) // 3].tolist())
+    assert (out / "agent.bvh").read_text().startswith("HIERARCHY")
+    save_audio(tmp_path / "short.wav", partner[: samples // 2], 16_000)
+    cases = (
+        [*args[:-1], str(tmp_path / "a"), "--partner", str(tmp_path / "short.wav")],
+        ["generate", str(moglow_run), "--conversation", "x", "--partner", "y", "--out", "z"],
+    )
+    for case, message in zip(cases, ("the agent's length", "goes with --audio"), strict=True):
+        assert main(case) == 2
+        assert message in capsys.readouterr().err
+
+
 def test_generate_makes_a_video_with_sound_from_a_conversation(moglow_run, tiny_data, tmp_path):
     stem = next((tiny_data / "test").glob("*.wav")).with_suffix("")
     out = tmp_path / "video"
