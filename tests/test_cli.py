@@ -162,6 +162,22 @@ def test_generate_hears_the_partner_and_writes_a_bvh(moglow_run, tmp_path, capsy
         assert message in capsys.readouterr().err
 
 
+def test_generate_takes_a_stereo_recording_at_any_rate(moglow_run, tmp_path):
+    """A 44.1 kHz stereo FLAC (speech on the left channel only) is down-mixed and resampled."""
+    import librosa
+    import soundfile
+
+    from data_synth import generate_conversation
+
+    speech = generate_conversation(5.0, seed=4).audio[:32_000]  # 2 s at 16 kHz
+    left = librosa.resample(speech, orig_sr=16_000, target_sr=44_100)
+    soundfile.write(tmp_path / "stereo.flac", np.stack([left, np.zeros_like(left)], 1), 44_100)
+    out = tmp_path / "out"
+    command = ["generate", str(moglow_run), "--audio", str(tmp_path / "stereo.flac")]
+    assert main([*command, "--out", str(out), "--no-video"]) == 0
+    assert np.load(out / "motion.npz")["rotations"].shape == (50, 9, 6)  # 2 s at 25 fps
+
+
 def test_generate_makes_a_video_with_sound_from_a_conversation(moglow_run, tiny_data, tmp_path):
     stem = next((tiny_data / "test").glob("*.wav")).with_suffix("")
     out = tmp_path / "video"
