@@ -386,6 +386,31 @@ def test_noise_alone_is_unvoiced():
     np.testing.assert_allclose(prosody(noise, 16000)[:, LOG_F0], np.log(features.F0_MIN))
 
 
+def syllables(seconds: float, sample_rate: int = 16000) -> np.ndarray:
+    """Speech-like sound: 0.15 s tone bursts (200 Hz, amplitude 0.5) every 0.2 s."""
+    t = np.arange(int(seconds * sample_rate)) / sample_rate
+    return (0.5 * np.sin(2 * np.pi * 200 * t) * ((t % 0.2) < 0.15)).astype(np.float32)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.005, 0.02])
+def test_voice_activity_finds_speech_between_silences_even_in_steady_noise(noise):
+    silence = np.zeros(16000, np.float32)
+    audio = np.concatenate([silence, syllables(2.0), silence, syllables(0.5), silence])
+    audio += noise * np.random.default_rng(6).standard_normal(audio.size).astype(np.float32)
+    voiced = features.voice_activity(audio, 16000)
+    expected = np.zeros(len(voiced), bool)
+    expected[25:75] = expected[100:112] = True  # frames 25 per second
+    assert np.mean(voiced == expected) > 0.95  # the syllables' 0.05 s gaps filled in
+    assert not voiced[:20].any() and not voiced[80:95].any() and not voiced[-20:].any()
+
+
+def test_voice_activity_drops_clicks_and_finds_no_voice_in_silence():
+    click = np.zeros(48000, np.float32)
+    click[24010:24300] = 0.5  # under 0.02 s, inside one frame: a click, not a syllable
+    assert not features.voice_activity(click, 16000).any()
+    assert not features.voice_activity(np.zeros(16000, np.float32), 16000).any()
+
+
 def test_mfcc_is_the_dct_of_the_log_mel():
     audio = np.random.default_rng(5).standard_normal(8000).astype(np.float32)
     expected = scipy.fft.dct(mel_spectrogram(audio, 16000), type=2, norm="ortho", axis=1)[:, :13]
