@@ -22,6 +22,7 @@ keypoint is. Angles are written in the channel order Z, X, Y (degrees), the most
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,8 @@ JOINTS: tuple[tuple[str, str | None, str | None], ...] = (
     ("right_wrist", "right_elbow", None),
 )
 ORDER = "ZXY"
+#: The length of the end bones (nose, wrists) as a share of the limb before them.
+END_SITE = 0.3
 
 
 def _offset(name: str, parent: str | None) -> np.ndarray:
@@ -89,7 +92,9 @@ def write_bvh(path: str | Path, rotations: np.ndarray, fps: int = FPS) -> Path:
     columns = [np.zeros((len(rotations), 3))]  # the root's position: the origin
     for name, parent, _ in JOINTS:
         local = world[name] if parent is None else np.swapaxes(world[parent], -1, -2) @ world[name]
-        columns.append(Rotation.from_matrix(local).as_euler(ORDER, degrees=True))
+        with warnings.catch_warnings():  # at gimbal lock the angles are still exact
+            warnings.filterwarnings("ignore", "Gimbal lock", UserWarning)
+            columns.append(Rotation.from_matrix(local).as_euler(ORDER, degrees=True))
     motion = np.concatenate(columns, axis=1)
 
     lines = ["HIERARCHY"]
@@ -110,8 +115,9 @@ def write_bvh(path: str | Path, rotations: np.ndarray, fps: int = FPS) -> Path:
         )
         for child in children[name]:
             describe(child, name, depth + 1)
-        if not children[name]:
-            lines.extend([f"{pad}  End Site", f"{pad}  {{", f"{pad}    OFFSET 0 0 0", f"{pad}  }}"])
+        if not children[name]:  # a short bone along the last limb, so that tools draw the end
+            tip = " ".join(f"{v:.6f}" for v in END_SITE * _offset(name, parent))
+            lines.extend([f"{pad}  End Site", f"{pad}  {{", f"{pad}    OFFSET {tip}", f"{pad}  }}"])
         lines.append(f"{pad}}}")
 
     describe(JOINTS[0][0], None, 0)

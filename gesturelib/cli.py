@@ -199,15 +199,18 @@ def run_generate(args) -> list[Path]:
             partner_audio, _ = load_audio(args.partner, sample_rate)
             if num_frames(len(partner_audio), sample_rate, FPS) != len(speaking):
                 raise CommandError(
-                    f"{args.partner} lasts {len(partner_audio) / sample_rate:.2f} s and "
-                    f"{args.audio} {len(audio) / sample_rate:.2f} s; the partner's recording must "
-                    "have the agent's length"
+                    f"{args.partner} lasts {len(partner_audio) / sample_rate:.3f} s and "
+                    f"{args.audio} {len(audio) / sample_rate:.3f} s; the partner's recording must "
+                    "have the agent's length (to within a frame, 40 ms)"
                 )
             partner = voice_activity(partner_audio, sample_rate)
             audio = _mix(audio, partner_audio)
         if not (speaking.any() or partner.any()):
+            heard = (
+                args.audio if args.partner is None else f"neither {args.audio} nor {args.partner}"
+            )
             raise CommandError(
-                f"{args.audio} holds no speech (silent, or too quiet to tell from silence): "
+                f"{heard} holds no speech (silent, or too quiet to tell from silence): "
                 "the agent would only rest; give a recording of speech"
             )
         activity = np.select(
@@ -260,8 +263,8 @@ def run_generate(args) -> list[Path]:
 
 
 def _mix(agent, partner):
-    """Both voices in one track ``(n,)``, as the conversations the models learned from: the sum,
-    scaled down only if it would clip (trimmed to the shorter recording)."""
+    """Both voices in one track ``(n,)``: their sum, scaled down only if it would clip (trimmed
+    to the shorter recording)."""
     import numpy as np
 
     n = min(len(agent), len(partner))

@@ -370,8 +370,11 @@ def prosody(audio: np.ndarray, sample_rate: int, fps: int = FPS) -> np.ndarray:
 VOICE_THRESHOLD_DB = 30.0
 #: ... and at least this many decibels above the recording's noise floor (its 5th percentile of
 #: frame energy), so that steady background noise is not taken for voice: with white noise
-#: 34 dB below the speech, the threshold alone marked every frame as voiced.
+#: 34 dB below the speech, the threshold alone marked every frame as voiced ...
 NOISE_MARGIN_DB = 6.0
+#: ... unless that would ask more than this many decibels below the loud frames: in a recording
+#: that never pauses the "noise floor" is quiet speech, which must stay voiced.
+NOISE_GATE_LIMIT_DB = 15.0
 
 
 def voice_activity(
@@ -380,7 +383,8 @@ def voice_activity(
     """Which motion frames hold speech, ``(T,)`` bool, from the energy of a recording of one voice.
 
     A frame has voice when its energy is within :data:`VOICE_THRESHOLD_DB` of the recording's loud
-    frames and :data:`NOISE_MARGIN_DB` above its quietest (the noise floor); pauses shorter than ``gap_s`` inside speech count as speech (the gaps between syllables
+    frames and :data:`NOISE_MARGIN_DB` above its quietest (the noise floor; never asking more than
+    :data:`NOISE_GATE_LIMIT_DB` below the loud frames, so speech without pauses stays voiced); pauses shorter than ``gap_s`` inside speech count as speech (the gaps between syllables
     and words), and stretches of voice shorter than ``blip_s`` do not (clicks). Relative to the
     recording, so the level it was recorded at does not matter; a recording without any sound
     (all frames below the energy floor) has no voice.
@@ -397,10 +401,9 @@ def voice_activity(
         np.add.reduceat(squares, boundaries[:-1]) / np.diff(boundaries) + ENERGY_FLOOR
     )
     loud, noise_floor = np.percentile(energy_db, [95, 5])
-    voiced = (
-        (energy_db > loud - VOICE_THRESHOLD_DB)
-        & (energy_db > noise_floor + NOISE_MARGIN_DB)
-        & (energy_db > 10 * np.log10(ENERGY_FLOOR) + 1)
+    gate = min(noise_floor + NOISE_MARGIN_DB, loud - NOISE_GATE_LIMIT_DB)
+    voiced = (energy_db > max(loud - VOICE_THRESHOLD_DB, gate)) & (
+        energy_db > 10 * np.log10(ENERGY_FLOOR) + 1
     )
     voiced = ~_short_runs(~voiced, round(gap_s * fps), keep_ends=True)  # fill short pauses
     return _short_runs(voiced, round(blip_s * fps), keep_ends=False)  # drop short blips

@@ -404,6 +404,16 @@ def test_voice_activity_finds_speech_between_silences_even_in_steady_noise(noise
     assert not voiced[:20].any() and not voiced[80:95].any() and not voiced[-20:].any()
 
 
+@pytest.mark.parametrize("dip_db", [3.0, 6.0, 10.0])
+def test_speech_without_pauses_stays_voiced(dip_db):
+    """No silence at all: the quietest frames are speech, and must not be gated as noise."""
+    t = np.arange(5 * 16000) / 16000
+    level = np.where((t % 0.25) < 0.18, 1.0, 10 ** (-dip_db / 20))  # syllables, shallow dips
+    level = level * np.where((t % 2.0) < 1.5, 1.0, 10 ** (-10 / 20))  # a quieter phrase
+    audio = (0.5 * level * np.sin(2 * np.pi * 180 * t)).astype(np.float32)
+    assert features.voice_activity(audio, 16000).mean() > 0.95
+
+
 def test_voice_activity_drops_clicks_and_finds_no_voice_in_silence():
     click = np.zeros(48000, np.float32)
     click[24010:24300] = 0.5  # under 0.02 s, inside one frame: a click, not a syllable
