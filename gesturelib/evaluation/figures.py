@@ -96,8 +96,8 @@ def plot_mean_pose_distance_series(
     fig.legend(*keypoints, fontsize=7, ncol=len(MOVING_KEYPOINTS), loc="upper left")
     fig.legend(handles=shading, fontsize=7, loc="upper right", title="who is talking")
     axes[-1].set_xlabel("time (s)")
-    fig.suptitle("distance from the mean pose (cm)", fontsize=9, y=0.995)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    fig.supylabel("distance from the mean pose (cm)", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
     return fig
 
 

@@ -126,6 +126,7 @@ README_COLUMNS = (
     ("stroke precision", "stroke_precision", 2),
     ("lead error (s) ↓", "lead_error", 3),
     ("nods", "nods", 2),
+    ("nod precision", "nod_precision", 2),
 )
 
 
