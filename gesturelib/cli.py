@@ -355,11 +355,7 @@ def run_evaluate(args) -> list[Path]:
     models = {name: [(m, n) for m, n, *_ in runs] for name, runs in groups.items()}
     rows, draws = evaluate_models(models, splits, args.samples, features)
     histories = {name: [(m, h) for m, _, h, _ in runs] for name, runs in groups.items()}
-    return [
-        report.write_table(rows, out / "metrics.csv"),
-        report.write_models(report.models_table(histories), out / "models.csv"),
-        *report.write_figures(draws, splits, out),
-    ]
+    return report.write_evaluation(rows, draws, histories, splits, out)
 
 
 def _run_groups(folders: list[Path]) -> dict[str, list]:

@@ -85,11 +85,8 @@ def main() -> int:
 
     out = REPO / "outputs" / ("results-quick" if args.quick else "results")
     out.mkdir(parents=True, exist_ok=True)
-    model_rows = report.models_table(histories)
-    report.write_table(rows, out / "metrics.csv")
-    report.write_models(model_rows, out / "models.csv")
-    report.write_figures(draws, splits, out)
-    table = report.markdown_table(rows, model_rows)
+    report.write_evaluation(rows, draws, histories, splits, out)
+    table = report.markdown_table(rows, report.models_table(histories))
     print(table)
     if not args.quick:
         text = readme.read_text()

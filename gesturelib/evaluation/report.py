@@ -87,6 +87,18 @@ def write_models(rows: dict[str, dict], path: str | Path) -> Path:
     return Path(path)
 
 
+def write_evaluation(rows: dict, draws: dict, histories: dict, splits, folder: str | Path) -> list:
+    """Everything an evaluation writes into ``folder``: ``metrics.csv`` (:func:`write_table` of
+    ``rows``), ``models.csv`` (:func:`models_table` of ``histories``) and the figures
+    (:func:`write_figures` of ``draws``). Returns the paths written."""
+    folder = Path(folder)
+    return [
+        write_table(rows, folder / "metrics.csv"),
+        write_models(models_table(histories), folder / "models.csv"),
+        *write_figures(draws, splits, folder),
+    ]
+
+
 def write_figures(draws: dict, splits, folder: str | Path) -> list[Path]:
     """The evaluation's figures (:mod:`gesturelib.evaluation.figures`) as PNG files in
     ``folder``, from the first draw of each system in ``draws`` (as
