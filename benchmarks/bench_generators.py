@@ -39,10 +39,11 @@ from data_synth import load_dataset
 from gesturelib import cli
 from gesturelib.data import make_datasets
 from gesturelib.evaluation import generate_for, headline_measures, reference_motions
-from gesturelib.features import mel_spectrogram
+from gesturelib.features import speech_features
 from gesturelib.history import History
 from gesturelib.metrics import rank_correlation
 from gesturelib.pose_surface import project
+from gesturelib.pretrained import load_run
 from gesturelib.recipes import RECIPES
 from gesturelib.sampling import generate
 from gesturelib.skeleton import forward_kinematics
@@ -64,7 +65,7 @@ def training_speed(run: Path, checkpoint, splits) -> tuple[float, float]:
 
 def streaming_speed(model, normaliser, conversation, samples: int) -> float:
     """How many times faster than real time ``samples`` motions of 20 s stream (best of 3)."""
-    speech = mel_spectrogram(conversation.audio, conversation.sample_rate)[:500]
+    speech = speech_features(conversation.audio, conversation.sample_rate)[:500]
     activity = conversation.activity[:500]
     best = float("inf")
     for _ in range(3):
@@ -118,7 +119,7 @@ def style_control(model, normaliser, conversations, samples: int, temperature: f
 
 def measure(run: Path, temperatures: list[float], samples: int) -> None:
     """Print the figures of one run folder."""
-    model, normaliser, checkpoint = cli.load_run(run)
+    model, normaliser, checkpoint = load_run(run)
     if not hasattr(model, "step"):
         raise SystemExit(f"{run} holds a {type(model).__name__}, which does not generate motion")
     summary = json.loads((run / "run.json").read_text())

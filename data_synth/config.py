@@ -191,13 +191,15 @@ class VoiceConfig:
         final_lengthening: duration factor of a phrase's last syllable (>= 1).
         declination_semitones: fall of the pitch baseline from a phrase's start to its end.
         question_probability: chance that a phrase ends rising instead of falling.
-        a_f0_hz: range of speaker A's base pitch (drawn per conversation): a lower, male voice.
+        a_f0_hz: range of speaker A's base pitch (drawn per conversation): a lower voice, from
+            deep to middling, so that the models meet more than one voice.
         b_f0_hz: the same for B: a higher, female voice.
         b_formant_scale: B's formant frequencies relative to A's (a shorter vocal tract).
         b_level_db: B's level relative to A's: B is off-microphone, quieter.
         b_lowpass_hz: B's voice is muffled by this low-pass (off-microphone).
         backchannel_level_db: level of a backchannel relative to its speaker's phrases.
-        noise_floor_db: background noise relative to the peak of the mix.
+        noise_floor_db: range of the background noise relative to the peak of the mix (drawn per
+            conversation): from a quiet studio to a noisy room.
         peak_level: the mix is scaled to this peak amplitude (< 1: never clips).
     """
 
@@ -210,13 +212,13 @@ class VoiceConfig:
     final_lengthening: float = 1.3
     declination_semitones: float = 3.0
     question_probability: float = 0.2
-    a_f0_hz: tuple[float, float] = (110.0, 130.0)
+    a_f0_hz: tuple[float, float] = (95.0, 165.0)
     b_f0_hz: tuple[float, float] = (200.0, 220.0)
     b_formant_scale: float = 1.17
     b_level_db: float = -9.0
     b_lowpass_hz: float = 3500.0
     backchannel_level_db: float = -4.0
-    noise_floor_db: float = -60.0
+    noise_floor_db: tuple[float, float] = (-60.0, -30.0)
     peak_level: float = 0.8
 
     def __post_init__(self):
@@ -235,7 +237,7 @@ class VoiceConfig:
         _check_number(self, "b_level_db", high=0.0)
         _positive(self, "b_lowpass_hz")
         _check_number(self, "backchannel_level_db", high=0.0)
-        _check_number(self, "noise_floor_db", high=-20.0)
+        _check_range(self, "noise_floor_db", high=-20.0)
         _check_number(self, "peak_level", 0.0, 1.0, low_open=True)
 
 

@@ -42,7 +42,7 @@ from gesturelib.features import load_audio, num_frames, save_audio
 from gesturelib.skeleton import NUM_JOINTS
 
 #: Version of the generator's rules; written into every file and manifest.
-GENERATOR_VERSION = "1.1"
+GENERATOR_VERSION = "1.2"
 FILE_FORMAT = "data_synth.conversation"
 #: The shortest conversation accepted. With the default turns a conversation shorter than about
 #: 4 s may draw no phrase at all for some seeds; such a draw is refused (see

@@ -16,10 +16,11 @@ alone (a stressed vowel is louder because its level is, not because of its vowel
 has a raised-cosine attack and release. The segments of one kind are gathered into one array,
 filtered in one call and added back: the work is vectorised per kind, not per syllable.
 
-Voices (:class:`Voice`, drawn per conversation): A is lower (base F0 110-130 Hz), B higher
+Voices (:class:`Voice`, drawn per conversation): A is lower (base F0 95-165 Hz), B higher
 (200-220 Hz), quieter by ``b_level_db`` and muffled by a low-pass at ``b_lowpass_hz``: B is
-off-microphone. :func:`mix` adds the two tracks and a faint noise floor, and scales the result
-to ``peak_level``: a mono float32 track that never clips.
+off-microphone. :func:`mix` adds the two tracks and a noise floor (from a quiet studio to a noisy
+room, drawn per conversation), and scales the result to ``peak_level``: a mono float32 track that
+never clips.
 """
 
 from __future__ import annotations
@@ -147,12 +148,13 @@ def synthesize_speech(
 
 
 def mix(tracks: list[np.ndarray], config: VoiceConfig, rng: np.random.Generator) -> np.ndarray:
-    """Add the speakers' tracks ``(n,)`` and a noise floor; scale to ``peak_level``: float32."""
+    """Add the speakers' tracks ``(n,)`` and a noise floor drawn from ``noise_floor_db``; scale to
+    ``peak_level``: float32."""
     total = np.sum(tracks, axis=0)
     peak = float(np.abs(total).max())
     if peak > 0:
         total *= config.peak_level / peak
-    noise_level = config.peak_level * 10.0 ** (config.noise_floor_db / 20.0)
+    noise_level = config.peak_level * 10.0 ** (rng.uniform(*config.noise_floor_db) / 20.0)
     total += noise_level * rng.standard_normal(total.size)
     return total.astype(np.float32)
 

@@ -51,7 +51,7 @@ from torch.utils.data import Dataset
 
 from gesturelib.configs import SpeechContext, check_fields
 from gesturelib.conventions import FPS, N_MELS, NUM_ACTIVITIES
-from gesturelib.features import activity_one_hot, mel_spectrogram
+from gesturelib.features import activity_one_hot, speech_features
 from gesturelib.skeleton import NUM_JOINTS, POSE_DIM, forward_kinematics, mirror_rotations
 from gesturelib.style import STYLE_FEATURES, style_features
 
@@ -102,7 +102,8 @@ class ConversationFeatures:
 
     Attributes:
         pose: ``(T, 54)`` limb rotations, 6D, flattened joint-major.
-        speech: ``(T, n_mels)`` log-mel (27 bands by default).
+        speech: ``(T, n_mels)`` log-mel normalised per recording
+            (:func:`~gesturelib.features.speech_features`; 27 bands by default).
         activity: ``(T, 4)`` one-hot.
         style: ``(T, 4)`` the style measured from the motion (:mod:`gesturelib.style`).
 
@@ -184,7 +185,7 @@ class ConversationFeatures:
                 "limb-frames marked in conversation.visible): fill the gaps first, e.g. with the "
                 "imputing autoencoder of notebook 06, and train on the filled motion"
             )
-        speech = mel_spectrogram(
+        speech = speech_features(
             conversation.audio, conversation.sample_rate, fps=conversation.fps, n_mels=n_mels
         )
         activity = activity_one_hot(np.asarray(conversation.activity))

@@ -22,6 +22,9 @@ Conventions:
   interval and nothing else. Bands run from 0 Hz to the Nyquist frequency, so features are only
   comparable between recordings at the same sample rate; :func:`load_audio` resamples to 16 kHz.
 * MFCC (:func:`mfcc`): the DCT-II (orthonormal) of that log-mel, i.e. the same frames.
+* What the models hear (:func:`speech_features`): that log-mel normalised per recording, from
+  its noise floor (0) to its speech level (1), so that recordings made at other levels and in
+  other noise look alike.
 * Prosody (:func:`prosody`): the four features of Kucherenko et al. (2021), named in
   :data:`PROSODY_FEATURES`; see that function for how unvoiced frames are handled.
 * Speech activity (:func:`activity_one_hot`): one :class:`~gesturelib.conventions.Activity` code
@@ -311,6 +314,41 @@ def mfcc(
     log_mel = mel_spectrogram(audio, sample_rate, fps=fps, n_mels=n_mels)  # (T, n_mels)
     coefficients = librosa.feature.mfcc(S=log_mel.T, n_mfcc=n_mfcc)  # (n_mfcc, T)
     return coefficients.T.astype(np.float32)
+
+
+#: The quietest frames of a recording, this percentage of them by mean log-mel, give its noise
+#: floor (:func:`speech_features`)...
+NOISE_FLOOR_PERCENTILE = 10
+#: ...and percentile, over frames, of the mean height above the floors taken as the speech level.
+SPEECH_LEVEL_PERCENTILE = 95
+#: The speech level is at least this many nats above the floor (about 9 dB of power; speech
+#: rises 20 dB and more above a pause), so that a recording of silence or of steady noise is not
+#: blown up into speech-sized features.
+MIN_SPEECH_RANGE = 2.0
+
+
+def speech_features(
+    audio: np.ndarray, sample_rate: int, fps: int = FPS, n_mels: int = N_MELS
+) -> np.ndarray:
+    """What the models hear: the log-mel ``(T, n_mels)`` float32, normalised per recording.
+
+    Each band is measured from the recording's own noise floor (the band's mean over the
+    recording's quietest :data:`NOISE_FLOOR_PERCENTILE` % of frames), in units of the recording's
+    speech level (the :data:`SPEECH_LEVEL_PERCENTILE`-th percentile over frames of the mean height
+    above the floor). Silence and steady background noise then read about 0 and loud speech
+    about 1, whatever the level, the microphone gain or the noise a recording was made with: a
+    person's recording in a quiet room, a noisy one and the generator's tracks look alike to the
+    model. Frames align as in :func:`mel_spectrogram`; the arguments are the same.
+
+    The statistics are the recording's, so features of a clip cut from a longer recording differ
+    slightly from the same frames of the whole: compute them on what the model will hear.
+    """
+    log_mel = mel_spectrogram(audio, sample_rate, fps=fps, n_mels=n_mels)
+    loudness = log_mel.mean(axis=1)  # (T,)
+    quiet = loudness <= np.percentile(loudness, NOISE_FLOOR_PERCENTILE)
+    above = log_mel - log_mel[quiet].mean(axis=0)  # (T, n_mels) minus the floor (n_mels,)
+    level = np.percentile(above.mean(axis=1), SPEECH_LEVEL_PERCENTILE)
+    return (above / max(float(level), MIN_SPEECH_RANGE)).astype(np.float32)
 
 
 # --------------------------------------------------------------------------- prosody

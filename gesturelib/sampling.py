@@ -35,13 +35,14 @@ import torch
 
 from gesturelib.configs import check_temperature
 from gesturelib.conventions import Activity
-from gesturelib.features import MEL_FLOOR, activity_one_hot
+from gesturelib.features import activity_one_hot
 from gesturelib.pose_surface import project
 from gesturelib.runtime import device_of, standard_normal
 from gesturelib.skeleton import NUM_JOINTS, POSE_DIM
 
-#: The log-mel of silence: what the speech window holds beyond either end of a recording.
-SILENCE = float(np.log(MEL_FLOOR))
+#: Silence as :func:`~gesturelib.features.speech_features` gives it (the noise floor): what the
+#: speech window holds beyond either end of a recording.
+SILENCE = 0.0
 
 
 class Stream:
@@ -93,8 +94,8 @@ class Stream:
         """Add frames of speech; return the poses that can now be generated.
 
         Args:
-            speech: ``(n, n_mels)`` log-mel frames (raw, as
-                :func:`~gesturelib.features.mel_spectrogram` gives them).
+            speech: ``(n, n_mels)`` speech frames (as
+                :func:`~gesturelib.features.speech_features` gives them).
             activity: ``(n,)`` who-is-talking codes (:class:`~gesturelib.conventions.Activity`).
         Returns:
             ``(samples, m, 9, 6)`` limb rotations of the ``m`` frames that are now complete: those
@@ -103,7 +104,7 @@ class Stream:
         speech, activity = np.asarray(speech, np.float32), np.asarray(activity)
         n_mels = len(self.normaliser.speech_mean)
         if speech.ndim != 2 or speech.shape[1] != n_mels:
-            raise ValueError(f"speech must be (n, {n_mels}) log-mel frames, got {speech.shape}")
+            raise ValueError(f"speech must be (n, {n_mels}) frames, got {speech.shape}")
         if activity.shape != (len(speech),):
             raise ValueError(f"activity must be ({len(speech)},) codes, got {activity.shape}")
         normalised = self.normaliser.normalise_speech(speech)
@@ -181,7 +182,8 @@ def generate(model, normaliser, speech, activity, **options) -> np.ndarray:
 
     Args:
         model, normaliser: as for :class:`Stream`.
-        speech: ``(T, n_mels)`` raw log-mel of the recording (any ``T >= 1``).
+        speech: ``(T, n_mels)`` the recording's :func:`~gesturelib.features.speech_features`
+            (any ``T >= 1``).
         activity: ``(T,)`` who-is-talking codes; pass other codes than the recording's to make the
             agent speak or listen where it did not.
         options: ``samples``, ``temperature``, ``seed``, ``style`` of :class:`Stream`.

@@ -114,7 +114,7 @@ def test_speakers_have_their_pitch(conversation):
     voiced = rms > 0.05 * rms.max()
     f0_a = np.median(f0[voiced & (conversation.activity[frames] == Activity.A_SPEAKS)])
     f0_b = np.median(f0[voiced & (conversation.activity[frames] == Activity.B_SPEAKS)])
-    assert 105 < f0_a < 145  # a low voice, base 110-130 Hz plus accents
+    assert 90 < f0_a < 185  # a lower voice, base 95-165 Hz plus accents
     assert 190 < f0_b < 240  # a high voice, base 200-220 Hz
     assert f0_a == pytest.approx(conversation.voices["A"].f0_hz, rel=0.12)
     assert f0_b == pytest.approx(conversation.voices["B"].f0_hz, rel=0.12)

@@ -421,6 +421,42 @@ def test_voice_activity_drops_clicks_and_finds_no_voice_in_silence():
     assert not features.voice_activity(np.zeros(16000, np.float32), 16000).any()
 
 
+def speech_between_silences(noise: float = 0.0, gain: float = 1.0) -> np.ndarray:
+    """1 s of silence, 2 s of voiced syllables, 1 s of silence (frames 25-75 hold speech).
+
+    The syllables have a voice's many harmonics (a 150 Hz sawtooth), which reach every band.
+    """
+    t = np.arange(2 * 16000) / 16000
+    voiced = 0.5 * scipy.signal.sawtooth(2 * np.pi * 150 * t) * ((t % 0.2) < 0.15)
+    silence = np.zeros(16000)
+    audio = np.concatenate([silence, voiced, silence]).astype(np.float32)
+    audio += noise * np.random.default_rng(8).standard_normal(audio.size).astype(np.float32)
+    return gain * audio
+
+
+@pytest.mark.parametrize("gain", [0.05, 0.3, 1.9])
+def test_speech_features_do_not_depend_on_the_recording_level(gain):
+    clean = features.speech_features(speech_between_silences(noise=1e-3), 16000)
+    scaled = features.speech_features(speech_between_silences(noise=1e-3, gain=gain), 16000)
+    np.testing.assert_allclose(scaled, clean, atol=0.02)
+
+
+@pytest.mark.parametrize("noise", [1e-4, 0.003, 0.02])
+def test_speech_features_read_silence_as_zero_and_speech_as_one_in_any_noise(noise):
+    speech = features.speech_features(speech_between_silences(noise), 16000)
+    loudness = speech.mean(axis=1)  # (T,)
+    assert abs(np.median(loudness[:20])) < 0.1 and abs(np.median(loudness[-20:])) < 0.1
+    assert 0.8 < np.median(loudness[30:70]) < 1.2
+
+
+def test_speech_features_of_steady_noise_or_silence_stay_small():
+    """No speech to set the scale: the floor-to-speech range is not blown up to 1."""
+    noise = 0.01 * np.random.default_rng(9).standard_normal(32000).astype(np.float32)
+    assert np.abs(features.speech_features(noise, 16000).mean(axis=1)).max() < 0.3
+    silence = features.speech_features(np.zeros(16000, np.float32), 16000)
+    np.testing.assert_allclose(silence, 0.0, atol=1e-5)
+
+
 def test_mfcc_is_the_dct_of_the_log_mel():
     audio = np.random.default_rng(5).standard_normal(8000).astype(np.float32)
     expected = scipy.fft.dct(mel_spectrogram(audio, 16000), type=2, norm="ortho", axis=1)[:, :13]
@@ -432,7 +468,7 @@ def test_mfcc_is_the_dct_of_the_log_mel():
 # --------------------------------------------------------------------------- bad feature input
 
 
-@pytest.mark.parametrize("extract", [mel_spectrogram, mfcc, prosody])
+@pytest.mark.parametrize("extract", [mel_spectrogram, mfcc, prosody, features.speech_features])
 @pytest.mark.parametrize(
     ("audio", "error", "message"),
     [
@@ -457,7 +493,7 @@ def test_features_reject_non_integer_rates():
         prosody(np.zeros(1000), 1000)
 
 
-@pytest.mark.parametrize("extract", [mel_spectrogram, mfcc, prosody])
+@pytest.mark.parametrize("extract", [mel_spectrogram, mfcc, prosody, features.speech_features])
 @pytest.mark.parametrize(
     ("dtype", "advice"), [(np.int16, "divide by 32768"), (np.uint8, "subtract 128, divide by 128")]
 )

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from gesturelib.checkpoints import CheckpointMismatchError, load_model
-from gesturelib.features import mel_spectrogram
+from gesturelib.features import speech_features
 from gesturelib.models import (
     FlowVAE,
     FlowVAEConfig,
@@ -212,7 +212,7 @@ def test_the_elbo_reconstruction_is_a_gaussian_log_likelihood(data):
 def test_generation_is_deterministic_at_temperature_zero_and_by_seed(data, config):
     conversation, normaliser, batch, _ = data
     model = build(config, normaliser, batch)
-    speech = mel_spectrogram(conversation.audio, conversation.sample_rate)[:60]
+    speech = speech_features(conversation.audio, conversation.sample_rate)[:60]
     activity = conversation.activity[:60]
     cold = [generate(model, normaliser, speech, activity, temperature=0, seed=s) for s in (1, 2)]
     np.testing.assert_array_equal(*cold)

@@ -142,13 +142,13 @@ def reference_motions(
 def generate_for(conversations, model, normaliser, **options) -> list[np.ndarray]:
     """Keypoints ``(samples, T, 9, 3)`` generated for each conversation from its audio and who is
     talking (never its motion); ``options`` as for :func:`gesturelib.sampling.generate`."""
-    from gesturelib.features import mel_spectrogram
+    from gesturelib.features import speech_features
     from gesturelib.sampling import generate
     from gesturelib.skeleton import forward_kinematics
 
     motions = []
     for conversation in conversations:
-        speech = mel_spectrogram(conversation.audio, conversation.sample_rate)
+        speech = speech_features(conversation.audio, conversation.sample_rate)
         rotations = generate(model, normaliser, speech, conversation.activity, **options)
         motions.append(forward_kinematics(rotations))
     return motions

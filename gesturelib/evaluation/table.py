@@ -126,7 +126,7 @@ def model_rotations(conversations, model, normaliser, samples: int, seed: int = 
     """Limb rotations ``rotations[k][i]`` ``(T, 9, 6)``: sample ``k`` of the model for held-out
     conversation ``i``'s speech and who is talking (never its motion). A deterministic model
     (``noise_dim`` 0) gives one draw, whatever ``samples`` asks."""
-    from gesturelib.features import mel_spectrogram
+    from gesturelib.features import speech_features
     from gesturelib.sampling import generate
 
     drawn = samples if model.noise_dim > 0 else 1
@@ -134,7 +134,7 @@ def model_rotations(conversations, model, normaliser, samples: int, seed: int = 
         generate(
             model,
             normaliser,
-            mel_spectrogram(c.audio, c.sample_rate),
+            speech_features(c.audio, c.sample_rate),
             c.activity,
             samples=drawn,
             seed=seed,
