@@ -9,7 +9,8 @@ Commands (``docs/architecture.md`` has the contract they share):
                               score runs and the references on held-out conversations:
                               metrics.csv, models.csv and figures
     info RUN                  what a run folder holds
-    demo                      generate a conversation and render it into a folder
+    demo                      a conversation no model has heard: its recorded motion beside the
+                              shipped MoGlow's, rendered with the sound
 
 An error the user can fix is reported in one line on stderr, with exit status 2.
 """
@@ -146,43 +147,18 @@ def _fit(recipe, splits, quick: bool, args, folder: Path, inner, train):
 # ---------------------------------------------------------------------------------------------
 
 
-def load_run(folder: Path, device: str = "cpu"):
-    """``(model, normaliser, checkpoint)`` of a run folder's ``best.pt``."""
-    from gesturelib.checkpoints import load_model, read_checkpoint
-    from gesturelib.data import Normaliser
-    from gesturelib.recipes import MODEL_CLASSES
-    from gesturelib.runtime import device as checked_device
-
-    try:
-        device = checked_device(device)
-    except ValueError as error:
-        raise CommandError(str(error)) from None
-
-    path = Path(folder) / "best.pt"
-    if not Path(folder).is_dir():
-        raise CommandError(f"{folder} is not a run folder (no such folder)")
-    checkpoint = read_checkpoint(path, kind="best")
-    name = checkpoint["model_class"]
-    if name not in MODEL_CLASSES:
-        raise CommandError(f"{path} holds a {name!r}, which this version cannot load")
-    model = load_model(path, MODEL_CLASSES[name], device)
-    if checkpoint["normaliser"] is None:
-        raise CommandError(f"{path} has no normalisation statistics; retrain it with `train`")
-    return model, Normaliser.from_dict(checkpoint["normaliser"]), checkpoint
-
-
 def run_generate(args) -> list[Path]:
     """Generate motion for a recording with a trained run; return the files written."""
     import numpy as np
 
     from data_synth import load_conversation
-    from gesturelib.bvh import write_bvh
     from gesturelib.conventions import FPS, Activity
-    from gesturelib.features import load_audio, mel_spectrogram, num_frames, voice_activity
+    from gesturelib.features import load_audio, num_frames, speech_features, voice_activity
+    from gesturelib.pretrained import load_run
     from gesturelib.sampling import generate
     from gesturelib.skeleton import forward_kinematics
 
-    model, normaliser, _ = load_run(Path(args.run), args.device)
+    model, normaliser, _ = load_run(args.run, args.device)
     if not hasattr(model, "step"):
         raise CommandError(
             f"{args.run} holds a {type(model).__name__}, which does not generate motion"
@@ -230,7 +206,7 @@ def run_generate(args) -> list[Path]:
         if not getattr(model.config, "style", False):
             raise CommandError(f"{args.run} was trained without style control; drop --style")
         style = normaliser.style_at_percentiles(_parse_style(args.style))
-    speech = mel_spectrogram(audio, sample_rate)
+    speech = speech_features(audio, sample_rate)
     rotations = generate(
         model,
         normaliser,
@@ -247,19 +223,29 @@ def run_generate(args) -> list[Path]:
     for number, sample in enumerate(rotations, start=1):
         folder = out if args.samples == 1 else out / f"sample-{number}"
         folder.mkdir(exist_ok=True)
-        positions = forward_kinematics(sample)
-        np.savez(
-            folder / "motion.npz",
-            rotations=sample.astype(np.float32),
-            positions=positions.astype(np.float32),
-            activity=np.asarray(activity, dtype=np.int64),
-            fps=np.int64(FPS),
-        )
-        written.append(folder / "motion.npz")
-        written.append(write_bvh(folder / "agent.bvh", sample))
+        written += _write_motion(folder, sample, activity)
         if not args.no_video:
-            written.append(_render(positions, audio, sample_rate, folder / "agent.mp4"))
+            positions = forward_kinematics(sample)
+            written.append(_render([positions], ["the agent"], audio, sample_rate, folder))
     return written
+
+
+def _write_motion(folder: Path, rotations, activity) -> list[Path]:
+    """``motion.npz`` and ``agent.bvh`` of limb rotations ``(T, 9, 6)`` in ``folder``."""
+    import numpy as np
+
+    from gesturelib.bvh import write_bvh
+    from gesturelib.conventions import FPS
+    from gesturelib.skeleton import forward_kinematics
+
+    np.savez(
+        folder / "motion.npz",
+        rotations=rotations.astype(np.float32),
+        positions=forward_kinematics(rotations).astype(np.float32),
+        activity=np.asarray(activity, dtype=np.int64),
+        fps=np.int64(FPS),
+    )
+    return [folder / "motion.npz", write_bvh(folder / "agent.bvh", rotations)]
 
 
 def _mix(agent, partner):
@@ -286,21 +272,25 @@ def _parse_style(pairs: list[str]) -> dict[str, float]:
     return parsed
 
 
-def _render(positions, audio, sample_rate: int, path: Path) -> Path:
+def _render(motions, titles, audio, sample_rate: int, folder: Path) -> Path:
+    """``folder/agent.mp4``: the motions ``[(T, 9, 3), ...]`` side by side, with the sound."""
     import matplotlib
 
     matplotlib.use("Agg")
     from gesturelib import viz
 
-    animation = viz.animate(positions, titles=["the agent"])
-    return viz.save_animation(animation, path, audio=audio, sample_rate=sample_rate, overwrite=True)
+    animation = viz.animate(motions, titles=titles)
+    return viz.save_animation(
+        animation, folder / "agent.mp4", audio=audio, sample_rate=sample_rate, overwrite=True
+    )
 
 
 def run_info(args) -> str:
     """A description of a run folder."""
     from gesturelib.history import History
+    from gesturelib.pretrained import load_run
 
-    model, _, checkpoint = load_run(Path(args.run))
+    model, _, checkpoint = load_run(args.run)
     history = History.from_dict(checkpoint["history"])
     parameters = sum(p.numel() for p in model.parameters())
     size = sum(p.stat().st_size for p in Path(args.run).rglob("*") if p.is_file())
@@ -365,6 +355,7 @@ def _run_groups(folders: list[Path]) -> dict[str, list]:
     each with its run folder last."""
     from gesturelib.evaluation.table import REFERENCES
     from gesturelib.history import History
+    from gesturelib.pretrained import load_run
     from gesturelib.train import EXECUTION_FIELDS
 
     resolved = [Path(folder).resolve() for folder in folders]
@@ -441,7 +432,9 @@ def _evaluation_data(args, quick: bool, groups: dict) -> Path:
 
 
 def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> list[Path]:
-    """Generate a conversation and write it, rendered, into ``out``; return the files written."""
+    """Generate a conversation no model has heard, let the shipped MoGlow move the agent to its
+    speech, and render the recorded motion and MoGlow's side by side (a video with sound), with
+    pictures of the speech and the poses; return the files written."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -449,26 +442,27 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
 
     from data_synth import generate_conversation, save_conversation
     from gesturelib import viz
-    from gesturelib.features import mel_spectrogram
+    from gesturelib.features import mel_spectrogram, speech_features
+    from gesturelib.pretrained import load_run, pretrained_folder
+    from gesturelib.sampling import generate
+    from gesturelib.skeleton import forward_kinematics
 
     if seconds <= 0:
         raise CommandError(f"--seconds must be positive, got {seconds}")
+    model, normaliser, _ = load_run(pretrained_folder("moglow"))
     _output_folder(out, overwrite, "demo")
     print(f"Generating a {seconds:g} s conversation (seed {seed}) ...")
     conversation = generate_conversation(seconds, seed=seed)
     written = save_conversation(conversation, out / "conversation", overwrite=True)
 
-    print("Rendering the agent with its speech ...")
-    anim = viz.animate(conversation.positions, fps=conversation.fps, titles=["agent (speaker A)"])
-    written.append(
-        viz.save_animation(
-            anim,
-            out / "agent.mp4",
-            audio=conversation.audio,
-            sample_rate=conversation.sample_rate,
-            overwrite=True,
-        )
-    )
+    print("The shipped MoGlow moves the agent to the conversation's speech ...")
+    speech = speech_features(conversation.audio, conversation.sample_rate)
+    rotations = generate(model, normaliser, speech, conversation.activity, seed=seed)[0]
+    written += _write_motion(out, rotations, conversation.activity)
+    print("Rendering the recorded motion and MoGlow's side by side, with the speech ...")
+    motions = [conversation.positions, forward_kinematics(rotations)]
+    titles = ["recorded (the generator's rules)", "MoGlow (shipped model)"]
+    written.append(_render(motions, titles, conversation.audio, conversation.sample_rate, out))
     mel = mel_spectrogram(conversation.audio, conversation.sample_rate, fps=conversation.fps)
     figure = viz.plot_timeline(
         mel,
@@ -578,7 +572,9 @@ def _parser() -> argparse.ArgumentParser:
     info = commands.add_parser("info", help="what a run folder holds")
     info.add_argument("run", type=Path)
 
-    demo = commands.add_parser("demo", help="render a synthetic conversation into a folder")
+    demo = commands.add_parser(
+        "demo", help="a new conversation: its recorded motion and the shipped MoGlow's, rendered"
+    )
     demo.add_argument("--out", type=Path, default=Path("outputs/demo"), help="output folder")
     demo.add_argument("--seconds", type=float, default=20.0, help="length of the conversation")
     demo.add_argument("--seed", type=_at_least(0), default=0, help="seed of the conversation")
