@@ -1,0 +1,124 @@
+"""Make the recordings of speech that the tests and chapter 08 drive the agent with.
+
+Speech the generator did not make: text-to-speech voices of espeak-ng, degraded with sox (noise,
+reverb, a telephone's band), as a person's recordings are. Each recording is two seconds of
+silence, then phrases with pauses of 3-4 s between them (long enough for the agent of our data to
+retract its hands and rest before it prepares the next gesture), then two seconds of silence, so
+that the speech and the silences are known (written beside the recordings in ``voices.csv``).
+
+Needs Debian's espeak-ng and sox (``apt-get install espeak-ng sox``). Run from the repository root:
+
+    python tools/make_test_voices.py          # writes tests/data/voices/
+"""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import soundfile
+
+OUT = Path("tests/data/voices")
+PHRASES = (
+    "So I went down to the harbour, and the boats were all gone.",
+    "Nobody knew where they had sailed, not even the old captain.",
+    "And then, at midnight, every one of them came back at once!",
+    "I think we should try the other road tomorrow morning.",
+    "It is longer, but the view from the hill is really worth it.",
+    "Bring a coat, because the wind up there can be very cold.",
+)
+#: name -> (espeak-ng voice, words per minute, pitch 0-99, sox effects, output rate in Hz)
+RECORDINGS = {
+    "us_clean": ("en-us", 160, 45, [], 22050),
+    "rp_reverb": ("en-gb-x-rp", 150, 40, ["reverb", "50", "50", "80"], 22050),
+    "us_female_noise": ("en-us+f3", 170, 60, ["noise", "0.02"], 16000),
+    "scottish_phone": ("en-gb-scotland", 155, 35, ["sinc", "300-3400", "noise", "0.01"], 8000),
+    "caribbean_room": ("en-029", 165, 55, ["reverb", "30", "50", "60", "noise", "0.01"], 24000),
+}
+SILENCE_S = 2.0  # before the first phrase and after the last
+PAUSES_S = (3.0, 4.0)  # the agent retracts its hands for a second after a phrase
+
+
+def speak(text: str, voice: str, words_per_minute: int, pitch: int, folder: Path) -> np.ndarray:
+    """One phrase from espeak-ng, as float samples at 22050 Hz without leading/trailing silence."""
+    path = folder / "phrase.wav"
+    subprocess.run(
+        ["espeak-ng", "-v", voice, "-s", str(words_per_minute), "-p", str(pitch), "-w", path, text],
+        check=True,
+    )
+    audio, rate = soundfile.read(path, dtype="float32")
+    assert rate == 22050
+    loud = np.flatnonzero(np.abs(audio) > 0.01)
+    return audio[loud[0] : loud[-1] + 1]
+
+
+def degrade(audio: np.ndarray, effects: list[str], rate: int, folder: Path) -> np.ndarray:
+    """Apply sox effects; ``noise LEVEL`` adds white noise of that amplitude (sox's own, seeded)."""
+    clean, out = folder / "clean.wav", folder / "out.wav"
+    soundfile.write(clean, audio, 22050, subtype="FLOAT")
+    noise_level = None
+    if "noise" in effects:
+        at = effects.index("noise")
+        noise_level = effects[at + 1]
+        effects = effects[:at] + effects[at + 2 :]
+    subprocess.run(["sox", "-R", clean, out, *effects, "rate", str(rate)], check=True)
+    if noise_level is not None:
+        noise = folder / "noise.wav"
+        seconds = str(soundfile.info(out).duration)
+        subprocess.run(
+            ["sox", "-R", "-n", "-r", str(rate), "-c", "1", noise, "synth", seconds, "whitenoise"]
+            + ["vol", noise_level],
+            check=True,
+        )
+        mixed = folder / "mixed.wav"
+        subprocess.run(["sox", "-R", "-m", "-v", "1", out, "-v", "1", noise, mixed], check=True)
+        out = mixed
+    degraded, got = soundfile.read(out, dtype="float32")
+    assert got == rate
+    return degraded
+
+
+def main() -> int:
+    OUT.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for number, (name, (voice, speed, pitch, effects, rate)) in enumerate(RECORDINGS.items()):
+        with tempfile.TemporaryDirectory() as folder:
+            folder = Path(folder)
+            phrases = PHRASES[3 * (number % 2) : 3 * (number % 2) + 3]
+            pieces, spans, at = [np.zeros(int(SILENCE_S * 22050), np.float32)], [], SILENCE_S
+            for index, text in enumerate(phrases):
+                spoken = speak(text, voice, speed, pitch, folder)
+                spans.append((at, at + len(spoken) / 22050))
+                pause = PAUSES_S[index % 2] if index < len(phrases) - 1 else SILENCE_S
+                pieces += [spoken, np.zeros(int(pause * 22050), np.float32)]
+                at = spans[-1][1] + pause
+            audio = np.concatenate(pieces)
+            audio = 0.7 * audio / np.abs(audio).max()
+            degraded = degrade(audio, effects, rate, folder)
+        degraded = 0.9 * degraded / max(1.0, float(np.abs(degraded).max()) / 0.9)
+        path = OUT / f"{name}.flac"
+        soundfile.write(path, degraded, rate, subtype="PCM_16")
+        for start, end in spans:
+            rows.append(
+                {
+                    "recording": path.name,
+                    "speech_start_s": f"{start:.3f}",
+                    "speech_end_s": f"{end:.3f}",
+                }
+            )
+        print(
+            f"{path}: {len(degraded) / rate:.1f} s at {rate} Hz, {voice}, {' '.join(effects) or 'clean'}"
+        )
+    with open(OUT / "voices.csv", "w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
