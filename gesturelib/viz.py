@@ -60,14 +60,14 @@ MIN_ANIMATION_WIDTH_PX = 720
 _ANIMATION_PANEL_INCHES = (3.6, 4.0)
 
 
-def _bone_side(child: int) -> str:
+def bone_side(child: int) -> str:
     """``"left"``, ``"right"`` or ``"midline"``: where the bone ending at ``child`` is."""
     side = KEYPOINTS[child].split("_")[0]
     return side if side in ("left", "right") else "midline"
 
 
-def _bone_colour(child: int) -> str:
-    return SIDE_COLOURS[_bone_side(child)]
+def bone_colour(child: int) -> str:
+    return SIDE_COLOURS[bone_side(child)]
 
 
 def side_legend(target, extra=(), **legend_options):
@@ -131,10 +131,10 @@ def _skeleton_lines(ax, view: str, **line_style) -> list:
     lines = []
     for _, child in BONES:
         bone_style = dict(style)
-        if _bone_side(child) == FAR_SIDE[view]:
+        if bone_side(child) == FAR_SIDE[view]:
             bone_style["linewidth"] = FAR_ARM_WIDTH * style["linewidth"]
             bone_style["zorder"] = bone_style.get("zorder", 2) + 0.1
-        line = ax.plot([], [], color=colour or _bone_colour(child), **bone_style)[0]
+        line = ax.plot([], [], color=colour or bone_colour(child), **bone_style)[0]
         lines.append(line)
     return lines
 
