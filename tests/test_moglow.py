@@ -22,20 +22,7 @@ def data(short_windows):
     return short_windows[:3]
 
 
-def trained_looking(config, normaliser, batch, seed=0):
-    """A model whose every weight is random (so nothing is an identity) and whose ActNorm layers
-    have seen data."""
-    torch.manual_seed(seed)
-    model = MoGlow(config, normaliser)
-    model.loss(batch)  # initialises ActNorm and the conditioners
-    generator = torch.Generator().manual_seed(seed)
-    with torch.no_grad():
-        for parameter in model.parameters():
-            parameter.add_(0.2 * torch.randn(parameter.shape, generator=generator))
-    return model.eval()
-
-
-def test_a_whole_sequence_inverts_and_its_logdet_is_the_jacobians(data):
+def test_a_whole_sequence_inverts_and_its_logdet_is_the_jacobians(data, trained_looking):
     _, normaliser, batch = data
     model = trained_looking(SMALL, normaliser, batch).double()
     short = {name: part[:1, :3].double() for name, part in batch.items()}  # (1, 3, ...)
@@ -50,7 +37,7 @@ def test_a_whole_sequence_inverts_and_its_logdet_is_the_jacobians(data):
     torch.testing.assert_close(torch.linalg.slogdet(matrix)[1], logdet[0], atol=1e-8, rtol=1e-8)
 
 
-def test_teacher_forcing_and_frame_by_frame_agree_on_likelihood_and_samples(data):
+def test_teacher_forcing_and_frame_by_frame_agree_on_likelihood_and_samples(data, trained_looking):
     _, normaliser, batch = data
     model = trained_looking(SMALL, normaliser, batch).double()
     batch = {name: part.double() for name, part in batch.items()}
@@ -77,7 +64,7 @@ def test_teacher_forcing_and_frame_by_frame_agree_on_likelihood_and_samples(data
     torch.testing.assert_close(torch.stack(frames, dim=1), whole + last)
 
 
-def test_a_residual_moglow_models_the_change_from_the_last_pose(data):
+def test_a_residual_moglow_models_the_change_from_the_last_pose(data, trained_looking):
     _, normaliser, batch = data
     config = dataclasses.replace(SMALL, residual=True, pose_noise=0.0)
     model = trained_looking(config, normaliser, batch).double()
@@ -98,7 +85,7 @@ def test_a_residual_moglow_models_the_change_from_the_last_pose(data):
         MoGlowConfig(residual=True, past_poses=0)
 
 
-def test_data_dropout_changes_training_but_nothing_at_evaluation(data):
+def test_data_dropout_changes_training_but_nothing_at_evaluation(data, trained_looking):
     _, normaliser, batch = data
     model = trained_looking(SMALL, normaliser, batch)
     no_dropout = MoGlow(dataclasses.replace(SMALL, dropout=0.0), normaliser)
@@ -163,15 +150,15 @@ def test_project_turns_each_limb_by_its_shortest_arc_even_right_round():
         torch.testing.assert_close(limb_directions(project(expected)), poses)
 
 
-def generation_setup(data):
+def generation_setup(data, trained_looking):
     conversation, normaliser, batch = data
     model = trained_looking(SMALL, normaliser, batch)
     speech = speech_features(conversation.audio, conversation.sample_rate)
     return model, normaliser, speech, conversation.activity
 
 
-def test_same_seed_same_motion_and_sample_k_does_not_depend_on_how_many(data):
-    model, normaliser, speech, activity = generation_setup(data)
+def test_same_seed_same_motion_and_sample_k_does_not_depend_on_how_many(data, trained_looking):
+    model, normaliser, speech, activity = generation_setup(data, trained_looking)
     three = generate(model, normaliser, speech, activity, samples=3, seed=4)
     one = generate(model, normaliser, speech, activity, samples=1, seed=4)
     assert three.shape == (3, len(speech), 9, 6)
@@ -182,16 +169,16 @@ def test_same_seed_same_motion_and_sample_k_does_not_depend_on_how_many(data):
     assert not np.array_equal(other[0], one[0])
 
 
-def test_temperature_zero_is_deterministic_whatever_the_seed(data):
-    model, normaliser, speech, activity = generation_setup(data)
+def test_temperature_zero_is_deterministic_whatever_the_seed(data, trained_looking):
+    model, normaliser, speech, activity = generation_setup(data, trained_looking)
     first = generate(model, normaliser, speech, activity, temperature=0, seed=1)
     np.testing.assert_array_equal(
         first, generate(model, normaliser, speech, activity, temperature=0, seed=2)
     )
 
 
-def test_streaming_in_chunks_gives_the_motion_of_the_whole_recording(data):
-    model, normaliser, speech, activity = generation_setup(data)
+def test_streaming_in_chunks_gives_the_motion_of_the_whole_recording(data, trained_looking):
+    model, normaliser, speech, activity = generation_setup(data, trained_looking)
     whole = generate(model, normaliser, speech, activity, seed=3)
     stream, parts = Stream(model, normaliser, seed=3), []
     for start in range(0, len(speech), 7):  # 7 frames at a time, as a live caller would
@@ -201,8 +188,8 @@ def test_streaming_in_chunks_gives_the_motion_of_the_whole_recording(data):
     assert parts[0].shape[1] == 7 - SMALL.speech_future  # the look-ahead delays the first poses
 
 
-def test_a_recording_of_one_frame_is_enough_and_bad_features_are_refused(data):
-    model, normaliser, speech, activity = generation_setup(data)
+def test_a_recording_of_one_frame_is_enough_and_bad_features_are_refused(data, trained_looking):
+    model, normaliser, speech, activity = generation_setup(data, trained_looking)
     assert generate(model, normaliser, speech[:1], activity[:1]).shape == (1, 1, 9, 6)
     with pytest.raises(ValueError, match=r"speech must be \(n, 27\) frames"):
         generate(model, normaliser, speech[:, :20], activity)
@@ -212,7 +199,9 @@ def test_a_recording_of_one_frame_is_enough_and_bad_features_are_refused(data):
         generate(model, normaliser, speech, activity, samples=0)
 
 
-def test_style_control_holds_the_asked_style_and_refuses_impossible_percentiles(data):
+def test_style_control_holds_the_asked_style_and_refuses_impossible_percentiles(
+    data, trained_looking
+):
     conversation, normaliser, batch = data
     batch = {**batch, "style": batch["style"]}
     model = trained_looking(dataclasses.replace(SMALL, style=True), normaliser, batch)

@@ -116,6 +116,24 @@ def test_style_sliders_are_off_for_a_model_without_style(explorer):
     assert all(slider.disabled for slider in explorer.style.values())
 
 
+def test_style_sliders_steer_a_model_with_style_inputs(short_windows, trained_looking):
+    import dataclasses
+
+    from gesturelib.models import MoGlowConfig
+
+    conversation, normaliser, batch, _ = short_windows
+    config = MoGlowConfig.quick(speech_past=2, speech_future=3, past_poses=2, steps=2, hidden=8)
+    model = trained_looking(dataclasses.replace(config, style=True), normaliser, batch)
+    clip = Clip.from_conversation(conversation, seconds=4.0)
+    styled = Explorer({"styled": (model, normaliser)}, {"clip": clip})
+    assert not any(slider.disabled for slider in styled.style.values())
+    before = styled.render().motions
+    styled.style["hand_height"].value = 90
+    after = decoded(styled.viewer)  # the observer sampled again and showed it
+    np.testing.assert_array_equal(after[0], before[0])  # the recorded motion
+    assert np.abs(after[1] - before[1]).max() > 0.1  # cm: the sample follows the slider
+
+
 def test_clips_refuse_what_they_cannot_use(short_windows):
     conversation = short_windows[0]
     with pytest.raises(ValueError, match="does not fit"):
