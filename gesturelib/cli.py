@@ -149,11 +149,8 @@ def _fit(recipe, splits, quick: bool, args, folder: Path, inner, train):
 
 def run_generate(args) -> list[Path]:
     """Generate motion for a recording with a trained run; return the files written."""
-    import numpy as np
-
     from data_synth import load_conversation
-    from gesturelib.conventions import FPS, Activity
-    from gesturelib.features import load_audio, num_frames, speech_features, voice_activity
+    from gesturelib.features import AudioError, load_audio, speech_features, who_is_talking
     from gesturelib.pretrained import load_run
     from gesturelib.sampling import generate
     from gesturelib.skeleton import forward_kinematics
@@ -167,33 +164,14 @@ def run_generate(args) -> list[Path]:
         raise CommandError("--partner goes with --audio (a conversation brings both voices)")
     if args.audio is not None:
         audio, sample_rate = load_audio(args.audio)
-        if num_frames(len(audio), sample_rate, FPS) < 1:
-            raise CommandError(f"{args.audio} is shorter than one frame ({1000 // FPS} ms)")
-        speaking = voice_activity(audio, sample_rate)
-        partner = np.zeros_like(speaking)
-        if args.partner is not None:
-            partner_audio, _ = load_audio(args.partner, sample_rate)
-            if num_frames(len(partner_audio), sample_rate, FPS) != len(speaking):
-                raise CommandError(
-                    f"{args.partner} lasts {len(partner_audio) / sample_rate:.3f} s and "
-                    f"{args.audio} {len(audio) / sample_rate:.3f} s; the partner's recording must "
-                    "have the agent's length (to within a frame, 40 ms)"
-                )
-            partner = voice_activity(partner_audio, sample_rate)
-            audio = _mix(audio, partner_audio)
-        if not (speaking.any() or partner.any()):
-            heard = (
-                args.audio if args.partner is None else f"neither {args.audio} nor {args.partner}"
-            )
-            raise CommandError(
-                f"{heard} holds no speech (silent, or too quiet to tell from silence): "
-                "the agent would only rest; give a recording of speech"
-            )
-        activity = np.select(
-            [speaking & partner, speaking, partner],
-            [Activity.BOTH, Activity.A_SPEAKS, Activity.B_SPEAKS],
-            Activity.NONE,
-        )
+        partner = None if args.partner is None else load_audio(args.partner, sample_rate)[0]
+        try:
+            activity = who_is_talking(audio, sample_rate, partner)
+        except AudioError as error:
+            heard = args.audio if args.partner is None else f"{args.audio} with {args.partner}"
+            raise CommandError(f"{heard}: {error}") from error
+        if partner is not None:
+            audio = _mix(audio, partner)
     else:
         conversation = load_conversation(args.conversation)  # its motion is never read
         audio, sample_rate, activity = (
@@ -223,25 +201,25 @@ def run_generate(args) -> list[Path]:
     for number, sample in enumerate(rotations, start=1):
         folder = out if args.samples == 1 else out / f"sample-{number}"
         folder.mkdir(exist_ok=True)
-        written += _write_motion(folder, sample, activity)
+        positions = forward_kinematics(sample)
+        written += _write_motion(folder, sample, positions, activity)
         if not args.no_video:
-            positions = forward_kinematics(sample)
             written.append(_render([positions], ["the agent"], audio, sample_rate, folder))
     return written
 
 
-def _write_motion(folder: Path, rotations, activity) -> list[Path]:
-    """``motion.npz`` and ``agent.bvh`` of limb rotations ``(T, 9, 6)`` in ``folder``."""
+def _write_motion(folder: Path, rotations, positions, activity) -> list[Path]:
+    """``motion.npz`` and ``agent.bvh`` in ``folder``: limb rotations ``(T, 9, 6)``, their
+    keypoints ``(T, 9, 3)`` and who is talking ``(T,)``."""
     import numpy as np
 
     from gesturelib.bvh import write_bvh
     from gesturelib.conventions import FPS
-    from gesturelib.skeleton import forward_kinematics
 
     np.savez(
         folder / "motion.npz",
         rotations=rotations.astype(np.float32),
-        positions=forward_kinematics(rotations).astype(np.float32),
+        positions=positions.astype(np.float32),
         activity=np.asarray(activity, dtype=np.int64),
         fps=np.int64(FPS),
     )
@@ -461,9 +439,10 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
     print("The shipped MoGlow moves the agent to the conversation's speech ...")
     speech = speech_features(conversation.audio, conversation.sample_rate)
     rotations = generate(model, normaliser, speech, conversation.activity, seed=seed)[0]
-    written += _write_motion(out, rotations, conversation.activity)
+    positions = forward_kinematics(rotations)
+    written += _write_motion(out, rotations, positions, conversation.activity)
     print("Rendering the recorded motion and MoGlow's side by side, with the speech ...")
-    motions = [conversation.positions, forward_kinematics(rotations)]
+    motions = [conversation.positions, positions]
     titles = ["recorded (the generator's rules)", "MoGlow (shipped model)"]
     # From the front only: two motions in both views would take twice as long to render.
     audio, rate = conversation.audio, conversation.sample_rate

@@ -447,6 +447,43 @@ def voice_activity(
     return _short_runs(voiced, round(blip_s * fps), keep_ends=False)  # drop short blips
 
 
+def who_is_talking(
+    agent: np.ndarray, sample_rate: int, partner: np.ndarray | None = None, fps: int = FPS
+) -> np.ndarray:
+    """Who is talking, ``(T,)`` int64 :class:`~gesturelib.conventions.Activity` codes, from a
+    recording of the agent's voice and, if given, one of its partner's at the same rate: each
+    speaks where its recording holds speech (:func:`voice_activity`).
+
+    Raises:
+        AudioError: for unusable audio, a partner's recording of another length than the agent's
+            (by more than a frame), or when neither recording holds speech (the agent would only
+            rest).
+    """
+    speaking = voice_activity(agent, sample_rate, fps)
+    listening = np.zeros_like(speaking)
+    if partner is not None:
+        if num_frames(len(partner), sample_rate, fps) != len(speaking):
+            raise AudioError(
+                f"the partner's recording lasts {len(partner) / sample_rate:.3f} s and the "
+                f"agent's {len(agent) / sample_rate:.3f} s; it must have the agent's length (to "
+                f"within a frame, {1000 // fps} ms)"
+            )
+        listening = voice_activity(partner, sample_rate, fps)
+    if not (speaking.any() or listening.any()):
+        heard = (
+            "the recording holds no speech" if partner is None else "neither recording holds speech"
+        )
+        raise AudioError(
+            f"{heard} (silent, or too quiet to tell from silence): the agent would only rest; "
+            "give a recording of speech"
+        )
+    return np.select(
+        [speaking & listening, speaking, listening],
+        [Activity.BOTH, Activity.A_SPEAKS, Activity.B_SPEAKS],
+        Activity.NONE,
+    ).astype(np.int64)
+
+
 def _short_runs(mask: np.ndarray, shortest: int, keep_ends: bool) -> np.ndarray:
     """``mask`` without its runs of True shorter than ``shortest`` frames (runs touching either
     end of the recording are kept if ``keep_ends``)."""

@@ -19,6 +19,7 @@ and at least :data:`~gesturelib.viz.MIN_ANIMATION_WIDTH_PX` pixels of width.
 from __future__ import annotations
 
 import base64
+import html
 import io
 import tempfile
 import time
@@ -33,7 +34,7 @@ import soundfile
 import traitlets
 
 from gesturelib.conventions import FPS, Activity
-from gesturelib.features import AudioError, load_audio, speech_features, voice_activity
+from gesturelib.features import AudioError, load_audio, speech_features, who_is_talking
 from gesturelib.sampling import generate
 from gesturelib.skeleton import BONES, forward_kinematics
 from gesturelib.style import STYLE_FEATURES
@@ -90,10 +91,7 @@ class Clip:
         Raises:
             AudioError: for unusable audio, or a recording without speech.
         """
-        speaking = voice_activity(audio, sample_rate)
-        if not speaking.any():
-            raise AudioError("the recording holds no speech (silent, or too quiet to tell)")
-        activity = np.where(speaking, Activity.A_SPEAKS, Activity.NONE).astype(np.int64)
+        activity = who_is_talking(audio, sample_rate)
         frames = len(activity)
         return cls(np.asarray(audio[: frames * sample_rate // FPS]), sample_rate, activity)
 
@@ -101,10 +99,6 @@ class Clip:
     def from_file(cls, path: str | Path) -> Clip:
         """A recording in a file librosa reads (WAV, FLAC, OGG; any rate; stereo is down-mixed)."""
         return cls.from_recording(*load_audio(path))
-
-    @property
-    def seconds(self) -> float:
-        return len(self.activity) / FPS
 
 
 @dataclass(frozen=True)
@@ -127,127 +121,15 @@ class Take:
     sampling_s: float
 
 
-_VIEWER_JS = """
-function render({ model, el }) {
-  const width = model.get("width"), height = 400, timelineHeight = 36;
-  el.classList.add("gesturelib-viewer");
-  const canvas = document.createElement("canvas");
-  canvas.width = width; canvas.height = height;
-  canvas.title = "drag to turn the view; double-click to face the agent again";
-  const timeline = document.createElement("canvas");
-  timeline.width = width; timeline.height = timelineHeight;
-  timeline.title = "who is talking; click to jump there";
-  const audio = document.createElement("audio");
-  audio.controls = true; audio.style.width = width + "px";
-  el.append(canvas, timeline, audio);
-  const ctx = canvas.getContext("2d"), tctx = timeline.getContext("2d");
-  let yaw = 0, dragging = null, motions = null, frames = 0, count = 0, limits = null;
-
-  function load() {
-    const view = model.get("motions");
-    const buffer = view.buffer.slice(view.byteOffset, view.byteOffset + view.byteLength);
-    motions = new Float32Array(buffer);
-    count = model.get("count"); frames = count ? motions.length / (count * 9 * 3) : 0;
-    let high = 1;  // the farthest any joint gets from the root, for one scale in every panel
-    for (let i = 0; i < motions.length; i += 3)
-      high = Math.max(high, Math.hypot(motions[i], motions[i + 1], motions[i + 2]));
-    limits = high * 1.15;
-    audio.src = model.get("audio");
-    drawTimeline(); draw();
-  }
-  function joint(k, t, j) {
-    if (j < 0) return [0, 0, 0];
-    const o = ((k * frames + t) * 9 + j) * 3;
-    return [motions[o], motions[o + 1], motions[o + 2]];
-  }
-  function project([x, y, z], panel) {
-    // Yaw 0 is the front view: the agent faces you, so its left (+x) is on your right.
-    const c = Math.cos(yaw), s = Math.sin(yaw);
-    const h = c * x + s * z, depth = -s * x + c * z;
-    const panelWidth = width / count, scale = (Math.min(panelWidth, height - 40) / 2) / limits;
-    return [panelWidth * (panel + 0.5) + h * scale, height / 2 + 10 - (y - limits * 0.35) * scale, depth];
-  }
-  function frameNow() {
-    return Math.min(frames - 1, Math.max(0, Math.floor(audio.currentTime * model.get("fps"))));
-  }
-  function draw() {
-    ctx.clearRect(0, 0, width, height);
-    if (!frames) return;
-    const t = frameNow(), bones = model.get("bones"), colours = model.get("colours");
-    const titles = model.get("titles");
-    for (let k = 0; k < count; k++) {
-      // Painter's order: the bones farthest from you first, so the near arm is drawn over them.
-      const segments = bones.map(([a, b], i) => {
-        const p = project(joint(k, t, a), k), q = project(joint(k, t, b), k);
-        return { p, q, colour: colours[i], depth: (p[2] + q[2]) / 2 };
-      }).sort((u, v) => u.depth - v.depth);
-      for (const { p, q, colour } of segments) {
-        ctx.strokeStyle = colour; ctx.lineWidth = 4; ctx.lineCap = "round";
-        ctx.beginPath(); ctx.moveTo(p[0], p[1]); ctx.lineTo(q[0], q[1]); ctx.stroke();
-      }
-      ctx.fillStyle = "#222"; ctx.font = "14px sans-serif"; ctx.textAlign = "center";
-      ctx.fillText(titles[k], (width / count) * (k + 0.5), 20);
-    }
-    ctx.textAlign = "left"; ctx.font = "13px sans-serif"; ctx.fillStyle = "#222";
-    ctx.fillText(`${(t / model.get("fps")).toFixed(1)} s`, 8, height - 10);
-    const legend = model.get("legend");
-    let x = width - 8;
-    ctx.textAlign = "right";
-    for (const [label, colour] of legend.slice().reverse()) {
-      ctx.fillStyle = colour; ctx.fillText(label, x, height - 10);
-      x -= ctx.measureText(label).width + 16;
-    }
-    drawPlayhead(t);
-  }
-  function drawTimeline() {
-    const activity = model.get("activity"), palette = model.get("palette");
-    tctx.clearRect(0, 0, width, timelineHeight);
-    activity.forEach((code, t) => {
-      tctx.fillStyle = palette[code];
-      tctx.fillRect((t / activity.length) * width, 0, width / activity.length + 1, timelineHeight - 14);
-    });
-    tctx.font = "11px sans-serif"; tctx.textAlign = "left";
-    let x = 4;
-    tctx.fillStyle = "#222"; tctx.fillText("who is talking:", x, timelineHeight - 2);
-    x += tctx.measureText("who is talking:").width + 8;
-    for (const [label, colour] of model.get("talking_legend")) {
-      tctx.fillStyle = colour; tctx.fillRect(x, timelineHeight - 11, 10, 10);
-      tctx.fillStyle = "#222"; tctx.fillText(label, x + 13, timelineHeight - 2);
-      x += 13 + tctx.measureText(label).width + 12;
-    }
-  }
-  function drawPlayhead(t) {
-    drawTimeline();
-    const x = (t / Math.max(frames, 1)) * width;
-    tctx.fillStyle = "#000"; tctx.fillRect(x - 1, 0, 2, timelineHeight - 14);
-  }
-  function loop() { draw(); if (!audio.paused) requestAnimationFrame(loop); }
-  audio.addEventListener("play", () => requestAnimationFrame(loop));
-  audio.addEventListener("seeked", draw);
-  timeline.addEventListener("click", (e) => {
-    audio.currentTime = (e.offsetX / width) * frames / model.get("fps"); draw();
-  });
-  canvas.addEventListener("pointerdown", (e) => { dragging = [e.clientX, yaw]; });
-  window.addEventListener("pointerup", () => { dragging = null; });
-  canvas.addEventListener("pointermove", (e) => {
-    if (dragging) { yaw = dragging[1] + (e.clientX - dragging[0]) / 100; draw(); }
-  });
-  canvas.addEventListener("dblclick", () => { yaw = 0; draw(); });
-  model.on("change:motions", load);
-  model.on("change:audio", () => { audio.src = model.get("audio"); });
-  load();
-}
-export default { render };
-"""
-
-
 class PoseViewer(anywidget.AnyWidget):
     """Motions side by side, drawn in the browser, with their sound and who is talking.
 
     Set :meth:`show` with a :class:`Take`; the browser gets the positions as float32 bytes.
     """
 
-    _esm = _VIEWER_JS
+    _sent_audio = None  # the audio array the browser plays now
+
+    _esm = Path(__file__).with_name("viewer.js")
     motions = traitlets.Bytes(b"").tag(sync=True)  # (K, T, 9, 3) float32, little-endian
     count = traitlets.Int(0).tag(sync=True)
     titles = traitlets.List([]).tag(sync=True)
@@ -268,14 +150,15 @@ class PoseViewer(anywidget.AnyWidget):
         sync=True
     )
 
-    def show(self, take: Take, audio_changed: bool = True) -> None:
-        """Show ``take`` (its sound too, unless ``audio_changed`` is False: the same clip)."""
+    def show(self, take: Take) -> None:
+        """Show ``take``; its sound is encoded and sent again only when it is another recording."""
         with self.hold_sync():
             self.count = len(take.motions)
             self.titles = list(take.titles)
             self.activity = [int(code) for code in take.activity]
-            if audio_changed:
+            if take.audio is not self._sent_audio:
                 self.audio = wav_data_url(take.audio, take.sample_rate)
+                self._sent_audio = take.audio
             self.motions = np.ascontiguousarray(take.motions, dtype="<f4").tobytes()
 
 
@@ -293,18 +176,21 @@ class Explorer:
         models: name -> ``(model, normaliser)``, e.g. from
             :func:`gesturelib.pretrained.load_run`.
         clips: name -> :class:`Clip`; a recording uploaded in the explorer joins them.
-        samples: how many samples to show side by side.
 
     Changing any control samples again and shows the new motion. ``Explorer(...)`` displays
     itself in a notebook; :meth:`render` returns what it would show.
     """
 
-    def __init__(
-        self, models: Mapping[str, tuple], clips: Mapping[str, Clip], samples: int = 1
-    ) -> None:
+    def __init__(self, models: Mapping[str, tuple], clips: Mapping[str, Clip]) -> None:
         if not models or not clips:
             raise ValueError("the explorer needs at least one model and one clip")
-        self.models, self.clips, self.samples = dict(models), dict(clips), samples
+        for name, (model, _) in models.items():
+            if not hasattr(model, "step"):
+                raise ValueError(
+                    f"the model {name!r} is a {type(model).__name__}, which does not generate "
+                    "motion frame by frame; give MoGlow or a Flow-VAE"
+                )
+        self.models, self.clips = dict(models), dict(clips)
         slider = {"continuous_update": False, "style": {"description_width": "initial"}}
         self.model = ipywidgets.Dropdown(options=list(self.models), description="model")
         self.clip = ipywidgets.Dropdown(options=list(self.clips), description="speech")
@@ -331,7 +217,6 @@ class Explorer:
         for control in (*controls, *self.style.values()):
             control.observe(self._changed, names="value")
         self.upload.observe(self._uploaded, names="value")
-        self._shown_clip = None
         self.widget = ipywidgets.VBox(
             [
                 ipywidgets.HBox(
@@ -359,22 +244,18 @@ class Explorer:
         if has_style:
             style = normaliser.style_at_percentiles({n: s.value for n, s in self.style.items()})
         started = time.perf_counter()
-        speech = speech_features(clip.audio, clip.sample_rate)[: len(activity)]
-        rotations = generate(
+        speech = speech_features(clip.audio, clip.sample_rate)
+        (rotations,) = generate(
             model,
             normaliser,
             speech,
             activity,
-            samples=self.samples,
             temperature=self.temperature.value,
             seed=self.seed.value,
             style=style,
         )
         sampling_s = time.perf_counter() - started
-        motions = [forward_kinematics(sample).astype(np.float32) for sample in rotations]
-        titles = [f"{self.model.value}, sample {k + 1}" for k in range(self.samples)]
-        if self.samples == 1:
-            titles = [self.model.value]
+        motions, titles = [forward_kinematics(rotations).astype(np.float32)], [self.model.value]
         if clip.truth is not None and self.truth.value:
             motions.insert(0, clip.truth)
             titles.insert(0, "recorded motion")
@@ -390,18 +271,20 @@ class Explorer:
             slider.disabled = not has_style
         self.truth.disabled = self.clips[self.clip.value].truth is None
         take = self.render()
-        self.viewer.show(take, audio_changed=self.clip.value != self._shown_clip)
-        self._shown_clip = self.clip.value
+        self.viewer.show(take)
         self.status.value = (
             f"sampled {len(take.activity) / FPS:.1f} s of motion in {take.sampling_s:.2f} s"
         )
         return take
 
     def add_clip(self, name: str, clip: Clip) -> None:
-        """Offer ``clip`` as ``name`` and show it."""
+        """Offer ``clip`` as ``name`` (in place of a clip of that name) and show it."""
+        replaced = name in self.clips and self.clip.value == name
         self.clips[name] = clip
         self.clip.options = list(self.clips)
-        self.clip.value = name  # samples again through the observer
+        self.clip.value = name  # samples again through the observer, if the value changes...
+        if replaced:
+            self.update()  # ... which it does not for a new clip under the shown name
 
     def _changed(self, _change) -> None:
         self.update()
@@ -414,7 +297,10 @@ class Explorer:
                 file.flush()
                 try:
                     clip = Clip.from_file(file.name)
-                except (AudioError, ValueError) as error:
-                    self.status.value = f"<b>{upload['name']}</b>: {error}"
+                except AudioError as error:
+                    reason = str(error).replace(file.name, "the file")  # not a temporary path
+                    self.status.value = (
+                        f"<b>{html.escape(upload['name'])}</b>: {html.escape(reason)}"
+                    )
                     continue
             self.add_clip(upload["name"], clip)

@@ -457,6 +457,23 @@ def test_speech_features_of_steady_noise_or_silence_stay_small():
     np.testing.assert_allclose(silence, 0.0, atol=1e-5)
 
 
+def test_who_is_talking_from_the_agent_s_and_the_partner_s_recordings():
+    """The agent speaks in frames 25-75 (1-3 s); its partner from 2 s to the end."""
+    agent = speech_between_silences(noise=1e-3)
+    partner = np.roll(agent, 16000)
+    activity = features.who_is_talking(agent, 16000, partner)
+    assert activity.dtype == np.int64 and activity.shape == (100,)
+    for frames, expected in ((slice(5, 20), Activity.NONE), (slice(30, 45), Activity.A_SPEAKS)):
+        assert (activity[frames] == expected).all()
+    assert (activity[55:70] == Activity.BOTH).all() and (activity[80:95] == Activity.B_SPEAKS).all()
+    assert set(features.who_is_talking(agent, 16000).tolist()) == {Activity.NONE, Activity.A_SPEAKS}
+    with pytest.raises(AudioError, match="the agent's length"):
+        features.who_is_talking(agent, 16000, partner[:-1000])
+    silence = np.zeros_like(agent)
+    with pytest.raises(AudioError, match="neither recording holds speech"):
+        features.who_is_talking(silence, 16000, silence)
+
+
 def test_mfcc_is_the_dct_of_the_log_mel():
     audio = np.random.default_rng(5).standard_normal(8000).astype(np.float32)
     expected = scipy.fft.dct(mel_spectrogram(audio, 16000), type=2, norm="ortho", axis=1)[:, :13]

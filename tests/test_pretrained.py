@@ -8,9 +8,8 @@ import pytest
 import torch
 
 from gesturelib.checkpoints import CheckpointError, read_checkpoint, save_checkpoint
-from gesturelib.conventions import Activity
 from gesturelib.evaluation.headline import speaking_listening_ratio, stroke_lead
-from gesturelib.features import load_audio, speech_features, voice_activity
+from gesturelib.features import load_audio, speech_features, who_is_talking
 from gesturelib.pretrained import NAMES, PRETRAINED_DIR, export_run, load_run, pretrained_folder
 from gesturelib.sampling import generate
 from gesturelib.skeleton import forward_kinematics
@@ -44,7 +43,7 @@ def test_a_shipped_model_loads_as_float32_and_generates(shipped):
 def voiced_motion(model, normaliser, recording, samples=2):
     """The agent's motion for a recording: it speaks where the recording holds speech."""
     audio, rate = load_audio(recording)
-    activity = np.where(voice_activity(audio, rate), Activity.A_SPEAKS, Activity.NONE)
+    activity = who_is_talking(audio, rate)
     rotations = generate(
         model, normaliser, speech_features(audio, rate), activity, samples=samples, seed=0
     )

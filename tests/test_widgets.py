@@ -75,7 +75,7 @@ def test_a_recording_speaks_where_it_has_speech_and_has_no_recorded_motion(explo
     assert take.motions.shape[1] == len(clip.activity)
     speaking = clip.activity == Activity.A_SPEAKS
     assert 0.3 < speaking.mean() < 0.7  # three sentences between pauses of 3-4 s
-    assert not speaking[: FPS + FPS // 2].any()  # the first two seconds are silent
+    assert not speaking[: FPS + FPS // 2].any()  # the voice starts at 2 s (voices.csv)
 
 
 def test_the_browser_gets_the_sound_as_a_wav_it_can_play(explorer):
@@ -106,9 +106,16 @@ def test_an_upload_joins_the_clips_and_a_bad_one_says_why(explorer):
     explorer.upload.value = uploaded("mine.flac", (VOICES / "scottish_phone.flac").read_bytes())
     assert explorer.clip.value == "mine.flac" and "mine.flac" in explorer.clips
     assert explorer.clips["mine.flac"].sample_rate == 16000  # read at the models' rate
-    explorer.upload.value = uploaded("notes.wav", b"not audio")
-    assert "notes.wav" in explorer.status.value and "could not be read" in explorer.status.value
+    explorer.upload.value = uploaded("<notes>.wav", b"not audio")
+    status = explorer.status.value
+    assert "&lt;notes&gt;.wav" in status and "could not be read" in status  # escaped HTML
+    assert "/tmp" not in status  # the upload's name, never the temporary file's
     assert explorer.clip.value == "mine.flac"
+    # The same name again with another recording: the new one is sampled and heard.
+    heard = explorer.viewer.audio
+    explorer.upload.value = uploaded("mine.flac", (VOICES / "us_clean.flac").read_bytes())
+    assert explorer.viewer.audio != heard
+    assert explorer.viewer.count == 1 and len(explorer.viewer.activity) > 500  # us_clean: 22 s
 
 
 def test_style_sliders_are_off_for_a_model_without_style(explorer):
