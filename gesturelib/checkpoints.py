@@ -38,7 +38,10 @@ from torch import nn
 from gesturelib.configs import config_from_dict
 from gesturelib.runtime import device_of
 
-FORMAT, VERSION = "gesturelib-run", 3
+# The version changes whenever a run of older code would load but compute nonsense: 4 is the
+# speech of gesturelib.features.speech_features, normalised per recording (a run of version 3
+# was fitted to the raw log-mel).
+FORMAT, VERSION = "gesturelib-run", 4
 IDENTITY = ("model_class", "model_config", "train_config", "data")
 _LABELS = {
     "model_class": "model class",
@@ -57,15 +60,15 @@ class CheckpointMismatchError(CheckpointError):
 
 
 def save_checkpoint(contents: dict, path: str | Path) -> None:
-    """Write ``contents`` (plain values only, ``format`` and ``version`` added) to ``path``
-    atomically, creating its folder. On any error ``path`` keeps its previous contents.
+    """Write ``contents`` (plain values only; ``format`` and ``version`` set to this code's) to
+    ``path`` atomically, creating its folder. On any error ``path`` keeps its previous contents.
 
     Raises:
         CheckpointError: when the disk is full (naming the file); other ``OSError`` s as they are.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    contents = {"format": FORMAT, "version": VERSION, **contents}
+    contents = {**contents, "format": FORMAT, "version": VERSION}
     descriptor, temporary = tempfile.mkstemp(
         prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
     )

@@ -45,6 +45,8 @@ def load_run(folder: str | Path, device: str = "cpu"):
 
     device = checked_device(device)
     folder = Path(folder)
+    if folder.is_file():
+        raise CheckpointError(f"{folder} is a file; give the run folder that holds best.pt")
     if not folder.is_dir():
         raise CheckpointError(f"{folder} is not a run folder (no such folder)")
     path = folder / "best.pt"
@@ -96,6 +98,5 @@ def export_run(run: str | Path, out: str | Path, overwrite: bool = False) -> Pat
         key: value.half() if value.is_floating_point() else value
         for key, value in checkpoint["model"].items()
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    save_checkpoint({k: v for k, v in checkpoint.items() if k not in ("format", "version")}, path)
+    save_checkpoint(checkpoint, path)
     return path

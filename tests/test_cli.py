@@ -3,6 +3,7 @@ import json
 import numpy as np
 import pytest
 
+from gesturelib.checkpoints import VERSION
 from gesturelib.cli import OUTPUT_MARKER, main
 from gesturelib.features import load_audio
 
@@ -50,7 +51,7 @@ def test_demo_rejects_a_non_positive_length(tmp_path, capsys):
 def test_train_writes_a_run_folder_that_info_describes(moglow_run, capsys):
     assert {"best.pt", "last.pt", "run.json"} <= {p.name for p in moglow_run.iterdir()}
     summary = json.loads((moglow_run / "run.json").read_text())
-    assert summary["model"] == "moglow" and summary["quick"] and summary["version"] == 3
+    assert summary["model"] == "moglow" and summary["quick"] and summary["version"] == VERSION
     assert main(["info", str(moglow_run)]) == 0
     described = capsys.readouterr().out
     assert "MoGlow (" in described and "parameters" in described and "best epoch" in described
