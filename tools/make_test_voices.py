@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import soundfile
 
-OUT = Path("tests/data/voices")
+OUT = Path(__file__).resolve().parents[1] / "tests" / "data" / "voices"
 PHRASES = (
     "So I went down to the harbour, and the boats were all gone.",
     "Nobody knew where they had sailed, not even the old captain.",
@@ -31,13 +31,14 @@ PHRASES = (
     "It is longer, but the view from the hill is really worth it.",
     "Bring a coat, because the wind up there can be very cold.",
 )
-#: name -> (espeak-ng voice, words per minute, pitch 0-99, sox effects, output rate in Hz)
+#: name -> (espeak-ng voice, words per minute, pitch 0-99, sox effects, white noise amplitude
+#: (None: none), output rate in Hz)
 RECORDINGS = {
-    "us_clean": ("en-us", 160, 45, [], 22050),
-    "rp_reverb": ("en-gb-x-rp", 150, 40, ["reverb", "50", "50", "80"], 22050),
-    "us_female_noise": ("en-us+f3", 170, 60, ["noise", "0.02"], 16000),
-    "scottish_phone": ("en-gb-scotland", 155, 35, ["sinc", "300-3400", "noise", "0.01"], 8000),
-    "caribbean_room": ("en-029", 165, 55, ["reverb", "30", "50", "60", "noise", "0.01"], 24000),
+    "us_clean": ("en-us", 160, 45, [], None, 22050),
+    "rp_reverb": ("en-gb-x-rp", 150, 40, ["reverb", "50", "50", "80"], None, 22050),
+    "us_female_noise": ("en-us+f3", 170, 60, [], "0.02", 16000),
+    "scottish_phone": ("en-gb-scotland", 155, 35, ["sinc", "300-3400"], "0.01", 8000),
+    "caribbean_room": ("en-029", 165, 55, ["reverb", "30", "50", "60"], "0.01", 24000),
 }
 SILENCE_S = 2.0  # before the first phrase and after the last
 PAUSES_S = (3.0, 4.0)  # the agent retracts its hands for a second after a phrase
@@ -56,15 +57,13 @@ def speak(text: str, voice: str, words_per_minute: int, pitch: int, folder: Path
     return audio[loud[0] : loud[-1] + 1]
 
 
-def degrade(audio: np.ndarray, effects: list[str], rate: int, folder: Path) -> np.ndarray:
-    """Apply sox effects; ``noise LEVEL`` adds white noise of that amplitude (sox's own, seeded)."""
+def degrade(
+    audio: np.ndarray, effects: list[str], noise_level: str | None, rate: int, folder: Path
+) -> np.ndarray:
+    """Apply sox ``effects``, resample to ``rate``, then add white noise of amplitude
+    ``noise_level`` (sox's own, seeded) unless it is None."""
     clean, out = folder / "clean.wav", folder / "out.wav"
     soundfile.write(clean, audio, 22050, subtype="FLOAT")
-    noise_level = None
-    if "noise" in effects:
-        at = effects.index("noise")
-        noise_level = effects[at + 1]
-        effects = effects[:at] + effects[at + 2 :]
     subprocess.run(["sox", "-R", clean, out, *effects, "rate", str(rate)], check=True)
     if noise_level is not None:
         noise = folder / "noise.wav"
@@ -85,7 +84,8 @@ def degrade(audio: np.ndarray, effects: list[str], rate: int, folder: Path) -> n
 def main() -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     rows = []
-    for number, (name, (voice, speed, pitch, effects, rate)) in enumerate(RECORDINGS.items()):
+    for number, (name, recipe) in enumerate(RECORDINGS.items()):
+        voice, speed, pitch, effects, noise_level, rate = recipe
         with tempfile.TemporaryDirectory() as folder:
             folder = Path(folder)
             phrases = PHRASES[3 * (number % 2) : 3 * (number % 2) + 3]
@@ -98,7 +98,8 @@ def main() -> int:
                 at = spans[-1][1] + pause
             audio = np.concatenate(pieces)
             audio = 0.7 * audio / np.abs(audio).max()
-            degraded = degrade(audio, effects, rate, folder)
+            degraded = degrade(audio, effects, noise_level, rate, folder)
+        # Headroom: 0.9 of the level sox gave, and never a peak above 0.81 of full scale.
         degraded = 0.9 * degraded / max(1.0, float(np.abs(degraded).max()) / 0.9)
         path = OUT / f"{name}.flac"
         soundfile.write(path, degraded, rate, subtype="PCM_16")
@@ -111,7 +112,8 @@ def main() -> int:
                 }
             )
         print(
-            f"{path}: {len(degraded) / rate:.1f} s at {rate} Hz, {voice}, {' '.join(effects) or 'clean'}"
+            f"{path}: {len(degraded) / rate:.1f} s at {rate} Hz, {voice}, "
+            f"{' '.join(effects) or 'no effects'}, noise {noise_level}"
         )
     with open(OUT / "voices.csv", "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
