@@ -16,8 +16,8 @@ alone (a stressed vowel is louder because its level is, not because of its vowel
 has a raised-cosine attack and release. The segments of one kind are gathered into one array,
 filtered in one call and added back: the work is vectorised per kind, not per syllable.
 
-Voices (:class:`Voice`, drawn per conversation): A is lower (base F0 95-165 Hz), B higher
-(200-220 Hz), quieter by ``b_level_db`` and muffled by a low-pass at ``b_lowpass_hz``: B is
+Voices (:class:`Voice`, drawn per conversation): A is lower (base F0 drawn from ``VoiceConfig.a_f0_hz``),
+B higher (``b_f0_hz``), quieter by ``b_level_db`` and muffled by a low-pass at ``b_lowpass_hz``: B is
 off-microphone. :func:`mix` adds the two tracks and a noise floor (from a quiet studio to a noisy
 room, drawn per conversation), and scales the result to ``peak_level``: a mono float32 track that
 never clips.

@@ -4,7 +4,8 @@ For a frame ``t`` the papers' models get a *control signal* and predict the pose
 
 * ``past_pose``: the previous ``tau`` poses ``x_{t-tau} .. x_{t-1}`` (tau = 5 in MoGlow and the
   Flow-VAE paper), the autoregressive context;
-* ``speech``: log-mel rows ``t - past .. t + future`` (5 past and 25 future frames: 1 s of
+* ``speech``: rows ``t - past .. t + future`` of the speech features (the log-mel normalised
+  per recording, :func:`gesturelib.features.speech_features`) (5 past and 25 future frames: 1 s of
   look-ahead, because gestures *anticipate* the speech they go with);
 * ``activity``: the who-is-talking one-hot over the same window;
 * ``style``: MoGlow's style inputs, measured from the motion itself (:mod:`gesturelib.style`).
@@ -18,7 +19,7 @@ part           shape                                meaning
 =============  ===================================  ==========================================
 ``pose``       ``(L, 54)``                          target poses x_t (6D rotations, normalised)
 ``past_pose``  ``(L, tau, 54)``                     x_{t-tau} .. x_{t-1} for each target frame
-``speech``     ``(L, past + 1 + future, 27)``       log-mel window around each target frame
+``speech``     ``(L, past + 1 + future, 27)``       speech window around each target frame
 ``activity``   ``(L, past + 1 + future, 4)``        activity one-hot over the same window
 ``style``      ``(L, 4)``                           style of each target frame (normalised)
 =============  ===================================  ==========================================
@@ -294,7 +295,7 @@ class Normaliser:
         return pose * _like(self.pose_std, pose) + _like(self.pose_mean, pose)
 
     def normalise_speech(self, speech):
-        """``(..., n_mels)`` log-mel -> standardised."""
+        """``(..., n_mels)`` speech features -> standardised."""
         _check_last_dim(speech, len(self.speech_mean), "speech")
         return (speech - _like(self.speech_mean, speech)) / _like(self.speech_std, speech)
 

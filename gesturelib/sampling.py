@@ -95,7 +95,9 @@ class Stream:
 
         Args:
             speech: ``(n, n_mels)`` speech frames (as
-                :func:`~gesturelib.features.speech_features` gives them).
+                :func:`~gesturelib.features.speech_features` gives them; it normalises by the
+                whole recording's floor and level, so a live stream needs those measured on an
+                earlier recording of the same microphone and room).
             activity: ``(n,)`` who-is-talking codes (:class:`~gesturelib.conventions.Activity`).
         Returns:
             ``(samples, m, 9, 6)`` limb rotations of the ``m`` frames that are now complete: those

@@ -5,8 +5,8 @@ style, and watch the motion the model samples for it, with its sound.
   the motion recorded with it when there is one.
 * :class:`PoseViewer`: a widget that draws motions side by side in the browser (an HTML canvas,
   drag to turn the view), plays the sound in step and shows who is talking on a timeline under
-  them (click it to jump). It is fed the pose arrays, so a new motion shows at once: rendering a
-  matplotlib animation instead would take seconds per second of motion.
+  them (click it to jump). It is fed the pose arrays, so a new motion shows at once, where a
+  matplotlib animation would first render every frame.
 * :class:`Explorer`: the controls, a thin layer over :func:`gesturelib.sampling.generate`.
   :meth:`Explorer.render` returns the :class:`Take` that the viewer shows, so the explorer can be
   tested without a browser.

@@ -4,7 +4,7 @@
 
 Trains the full-mode recipes of :data:`gesturelib.pretrained.NAMES` from seed 0 on the course's
 full dataset (or takes them from the notebooks' cache, checkpoints/, where a chapter trained them
-already: about 12 minutes on two cores otherwise), and writes their best weights as float16 into
+already; training them otherwise takes several minutes), and writes their best weights as float16 into
 gesturelib/pretrained/<name>/best.pt. Run it only when a release needs new models: a change to the
 generator, the speech features or the models.
 """

@@ -44,6 +44,7 @@ def free_port() -> int:
 def main() -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     port = free_port()
+    log = open(OUT / "jupyterlab.log", "w")  # noqa: SIM115 (closed after the server, below)
     lab = subprocess.Popen(
         [
             sys.executable,
@@ -57,7 +58,7 @@ def main() -> int:
             "--allow-root",  # a container's user is often root
         ],
         env={**os.environ, "GESTURELIB_QUICK": "1"},
-        stdout=open(OUT / "jupyterlab.log", "w"),  # noqa: SIM115 (closed with the process)
+        stdout=log,
         stderr=subprocess.STDOUT,
     )
     try:
@@ -122,6 +123,7 @@ def main() -> int:
     finally:
         lab.terminate()
         lab.wait(timeout=30)
+        log.close()
     print(f"screenshots in {OUT}")
     return 0
 

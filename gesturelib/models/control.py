@@ -6,7 +6,7 @@ The control ``c_t`` of frame ``t`` is what the next-frame flow is conditioned on
   is replaced by the mean pose (zero, in normalised units) with probability ``dropout``,
   independently, so that the model cannot simply continue its past and ignore the speech
   (Alexanderson et al. 2020); validation and generation never drop;
-* the speech window (5 past, the current and 25 future log-mel frames: 1 s of look-ahead,
+* the speech window (5 past, the current and 25 future speech frames: 1 s of look-ahead,
   because gestures lead the speech they go with) and the same window of who is talking;
 * optionally MoGlow's style inputs (:mod:`gesturelib.style`).
 
