@@ -362,6 +362,16 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
         metadata = json.loads(metadata_path.read_text())
         if metadata.get("format") != FILE_FORMAT:
             raise ValueError(f"it is not a {FILE_FORMAT} file")
+    except (ValueError, AttributeError) as error:
+        raise DatasetError(f"{metadata_path} is damaged ({error}); {_REWRITE}") from error
+    written_by = metadata.get("generator_version")
+    if written_by != GENERATOR_VERSION:
+        raise DatasetError(
+            f"{metadata_path} was written by version {written_by} of the generator, whose files "
+            f"this version ({GENERATOR_VERSION}) does not read; make the conversation again "
+            "(generate_conversation and save_conversation, or `python -m data_synth` for a dataset)"
+        )
+    try:
         config = ConversationConfig.from_dict(metadata["config"])
         events = Events.from_dict(metadata["events"])
         style = Style.from_dict(metadata["style"])

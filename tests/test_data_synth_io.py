@@ -100,6 +100,14 @@ def test_loading_names_the_missing_or_damaged_file(conversation, tmp_path):
         load_conversation(tmp_path / "talk")
 
 
+def test_a_conversation_of_another_generator_version_says_so(conversation, tmp_path):
+    save_conversation(conversation, tmp_path / "talk")
+    metadata = json.loads((tmp_path / "talk.json").read_text())
+    (tmp_path / "talk.json").write_text(json.dumps({**metadata, "generator_version": "1.1"}))
+    with pytest.raises(DatasetError, match="talk.json was written by version 1.1 of the generator"):
+        load_conversation(tmp_path / "talk")
+
+
 # --------------------------------------------------------------------------- the dataset
 
 
