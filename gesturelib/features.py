@@ -340,14 +340,23 @@ def speech_features(
     person's recording in a quiet room, a noisy one and the generator's tracks look alike to the
     model. Frames align as in :func:`mel_spectrogram`; the arguments are the same.
 
+    Frames of digital silence (exact zeros, as editors and speech synthesisers write between
+    sentences) hold no sound to measure: they read 0 and play no part in the floor, which
+    otherwise they would pull far below a room's own noise, making its quiet pauses read as
+    speech. A recording of nothing but digital silence reads 0 throughout.
+
     The statistics are the recording's, so features of a clip cut from a longer recording differ
     slightly from the same frames of the whole: compute them on what the model will hear.
     """
     log_mel = mel_spectrogram(audio, sample_rate, fps=fps, n_mels=n_mels)
     loudness = log_mel.mean(axis=1)  # (T,)
-    quiet = loudness <= np.percentile(loudness, NOISE_FLOOR_PERCENTILE)
+    sound = loudness > np.log(MEL_FLOOR) + 1.0  # a nat above the floor of the log: not zeros
+    if not sound.any():
+        return np.zeros_like(log_mel)
+    quiet = sound & (loudness <= np.percentile(loudness[sound], NOISE_FLOOR_PERCENTILE))
     above = log_mel - log_mel[quiet].mean(axis=0)  # (T, n_mels) minus the floor (n_mels,)
-    level = np.percentile(above.mean(axis=1), SPEECH_LEVEL_PERCENTILE)
+    above[~sound] = 0.0
+    level = np.percentile(above[sound].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
     return (above / max(float(level), MIN_SPEECH_RANGE)).astype(np.float32)
 
 

@@ -79,3 +79,12 @@ def test_flowvae_ablation_benchmark_reports_both_losses_over_seeds():
     assert re.search(r"sample_mse [+-]\S+ \(\S+\)", output), output
     refused = launch("bench_flowvae_ablation.py", "--seeds", "1")
     assert refused.returncode == 2 and "--seeds must be at least 2" in refused.stderr
+
+
+def test_own_voice_benchmark_reports_each_recording():
+    output = run("bench_own_voice.py", "gesturelib/pretrained/moglow", "--samples", "1")
+    rows = [line for line in output.splitlines() if line.startswith("| `")]
+    assert len(rows) == 5  # the recordings of tests/data/voices
+    ratios = [float(row.split("|")[2]) for row in rows]
+    median = re.search(r"moglow: median ratio ([0-9.]+)", output)
+    assert median and float(median[1]) == pytest.approx(sorted(ratios)[2], abs=0.006)

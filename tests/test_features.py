@@ -449,6 +449,16 @@ def test_speech_features_read_silence_as_zero_and_speech_as_one_in_any_noise(noi
     assert 0.8 < np.median(loudness[30:70]) < 1.2
 
 
+def test_digital_silence_neither_sets_the_floor_nor_lifts_a_room_s_pauses():
+    """A second of exact zeros before a noisy recording (an editor's lead-in) changes nothing:
+    the zeros read 0, and the room's noisy pauses still read 0, not as speech."""
+    noisy = speech_between_silences(noise=0.003)
+    alone = features.speech_features(noisy, 16000)
+    led_in = features.speech_features(np.r_[np.zeros(16000, np.float32), noisy], 16000)
+    np.testing.assert_allclose(led_in[:25], 0.0, atol=1e-6)
+    np.testing.assert_allclose(led_in[25:], alone, atol=0.02)
+
+
 def test_speech_features_of_steady_noise_or_silence_stay_small():
     """No speech to set the scale: the floor-to-speech range is not blown up to 1."""
     noise = 0.01 * np.random.default_rng(9).standard_normal(32000).astype(np.float32)

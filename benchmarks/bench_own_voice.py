@@ -1,0 +1,79 @@
+"""Speech the generator did not make: the models on the recordings of ``tests/data/voices/``.
+
+For each recording (espeak-ng voices, clean, reverberant, noisy, through a telephone's band;
+``tools/make_test_voices.py``) and each model, the agent speaks where the recording holds speech
+(:func:`gesturelib.features.who_is_talking`) and K samples are drawn (seeds 0..K-1 of one call):
+
+* the speaking/silence ratio: the wrists' mean speed while the voice speaks over their mean speed
+  in its pauses, all samples pooled (:func:`~gesturelib.evaluation.speaking_listening_ratio`);
+* the lead of each sample's strokes over the speech's emphasis
+  (:func:`~gesturelib.evaluation.stroke_lead`; the data's rule is 0.2 s).
+
+Prints one Markdown table (the one in ``docs/benchmarks.md``) and the median ratio per model.
+
+Usage (the shipped models by default; any run folders of generative models otherwise)::
+
+    .venv/bin/python benchmarks/bench_own_voice.py [RUN ...] [--samples 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from gesturelib.evaluation import speaking_listening_ratio, stroke_lead
+from gesturelib.features import load_audio, speech_features, who_is_talking
+from gesturelib.pretrained import NAMES, load_run, pretrained_folder
+from gesturelib.sampling import generate
+from gesturelib.skeleton import forward_kinematics
+
+VOICES = Path(__file__).resolve().parents[1] / "tests" / "data" / "voices"
+
+
+def on_recording(model, normaliser, recording: Path, samples: int) -> tuple[float, list[float]]:
+    """``(speaking/silence ratio, one stroke lead per sample)`` of a model on ``recording``."""
+    audio, rate = load_audio(recording)
+    activity = who_is_talking(audio, rate)
+    speech = speech_features(audio, rate)
+    rotations = generate(model, normaliser, speech, activity, samples=samples, seed=0)
+    motions = [forward_kinematics(sample) for sample in rotations]
+    ratio = speaking_listening_ratio(motions, [activity] * samples)
+    return ratio, [stroke_lead(audio, rate, activity, motion) for motion in motions]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="*", type=Path, help="run folders (default: shipped models)")
+    parser.add_argument("--samples", type=int, default=3, help="samples per recording")
+    args = parser.parse_args()
+    if args.samples < 1:
+        parser.error(f"--samples must be at least 1, got {args.samples}")
+    runs = args.runs or [pretrained_folder(name) for name in NAMES]
+    recordings = sorted(VOICES.glob("*.flac"))
+
+    results = {}  # run name -> [(ratio, leads) per recording]
+    for run in runs:
+        model, normaliser, _ = load_run(run)
+        if not hasattr(model, "step"):
+            raise SystemExit(
+                f"{run} holds a {type(model).__name__}, which does not generate motion"
+            )
+        results[run.name] = [on_recording(model, normaliser, r, args.samples) for r in recordings]
+
+    header = " | ".join(f"{name} ratio | {name} leads (s)" for name in results)
+    print(f"| recording | {header} |")
+    print("|---|" + "---|---|" * len(results))
+    for index, recording in enumerate(recordings):
+        cells = []
+        for measured in results.values():
+            ratio, leads = measured[index]
+            cells += [f"{ratio:.2f}", ", ".join(f"{lead:.2f}" for lead in leads)]
+        print(f"| `{recording.stem}` | {' | '.join(cells)} |")
+    for name, measured in results.items():
+        print(f"{name}: median ratio {np.median([ratio for ratio, _ in measured]):.2f}")
+
+
+if __name__ == "__main__":
+    main()
