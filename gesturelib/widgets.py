@@ -1,5 +1,5 @@
-"""The sampling explorer: pick a model, some speech, a temperature, a seed, who is talking and a
-style, and watch the motion the model samples for it, with its sound.
+"""The sampling explorer: pick a model, some speech, a temperature, a seed, how many samples, who
+is talking and a style, and watch the motion the model samples for it, with its sound.
 
 * :class:`Clip`: what the models hear of a stretch of speech (the audio and who is talking), and
   the motion recorded with it when there is one.
@@ -201,6 +201,9 @@ class Explorer:
             value=1.0, min=0.0, max=1.5, step=0.05, description="temperature", **slider
         )
         self.seed = ipywidgets.BoundedIntText(value=0, min=0, max=2**31 - 1, description="seed")
+        self.samples = ipywidgets.IntSlider(
+            value=1, min=1, max=3, description="samples side by side", **slider
+        )
         self.talking = ipywidgets.Dropdown(options=list(TALKING), description="who talks")
         self.style = {
             name: ipywidgets.FloatSlider(
@@ -213,7 +216,15 @@ class Explorer:
         )
         self.status = ipywidgets.HTML()
         self.viewer = PoseViewer()
-        controls = [self.model, self.clip, self.temperature, self.seed, self.talking, self.truth]
+        controls = [
+            self.model,
+            self.clip,
+            self.temperature,
+            self.seed,
+            self.samples,
+            self.talking,
+            self.truth,
+        ]
         for control in (*controls, *self.style.values()):
             control.observe(self._changed, names="value")
         self.upload.observe(self._uploaded, names="value")
@@ -245,17 +256,24 @@ class Explorer:
             style = normaliser.style_at_percentiles({n: s.value for n, s in self.style.items()})
         started = time.perf_counter()
         speech = speech_features(clip.audio, clip.sample_rate)
-        (rotations,) = generate(
+        rotations = generate(
             model,
             normaliser,
             speech,
             activity,
+            samples=self.samples.value,
             temperature=self.temperature.value,
             seed=self.seed.value,
             style=style,
         )
         sampling_s = time.perf_counter() - started
-        motions, titles = [forward_kinematics(rotations).astype(np.float32)], [self.model.value]
+        motions = [forward_kinematics(sample).astype(np.float32) for sample in rotations]
+        name = self.model.value
+        titles = (
+            [name]
+            if len(motions) == 1
+            else [f"{name}, sample {k + 1}" for k in range(len(motions))]
+        )
         if clip.truth is not None and self.truth.value:
             motions.insert(0, clip.truth)
             titles.insert(0, "recorded motion")

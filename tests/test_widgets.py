@@ -58,6 +58,25 @@ def test_a_seed_gives_its_motion_again_and_another_seed_another(explorer):
     np.testing.assert_array_equal(explorer.render().motions, still)
 
 
+def test_samples_side_by_side_are_the_first_draws_of_the_seed(explorer):
+    explorer.clip.value, explorer.truth.value, explorer.temperature.value = "held-out", True, 1.0
+    explorer.seed.value = 3
+    one = explorer.render().motions[1]
+    explorer.samples.value = 3  # an observer samples again
+    take = explorer.render()
+    assert take.titles == (
+        "recorded motion",
+        "moglow, sample 1",
+        "moglow, sample 2",
+        "moglow, sample 3",
+    )
+    assert decoded(explorer.viewer).shape[0] == 4
+    explorer.samples.value = 1
+    # Sample 1 of three is sample 1 of one (up to the rounding of batched float32 arithmetic).
+    np.testing.assert_allclose(take.motions[1], one, atol=0.01)
+    assert np.abs(take.motions[2] - take.motions[1]).max() > 0.1
+
+
 def test_who_talks_can_be_forced(explorer):
     explorer.clip.value = "held-out"
     for label, code in (("the agent speaks", Activity.A_SPEAKS), ("nobody speaks", Activity.NONE)):
