@@ -3,7 +3,7 @@
 Needs Debian's blender and xvfb. Run from the repository root:
 
     xvfb-run -s "-screen 0 1280x800x24" blender --python tools/blender_screenshot.py -- \
-        outputs/08_your_own_voice/agent.bvh docs/images/blender_bvh.png
+        outputs/08_your_own_voice/generated/agent.bvh docs/images/blender_bvh.png
 
 Blender imports the file as a person would (File > Import > Motion Capture), shows frame 100 (4 s) in
 the 3D view seen from the front, saves a screenshot of its window and quits.
