@@ -81,15 +81,17 @@ def main() -> int:
             page.wait_for_timeout(5000)
             page.screenshot(path=OUT / "opened.png")
             page.keyboard.press("Escape")
-            page.click("text=Run", timeout=30_000)
-            page.click("text=Run All Cells", timeout=30_000)
+            # The menu bar's "Run", not a "Run" in the chapter's text.
+            page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click(timeout=30_000)
+            page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click(timeout=30_000)
             try:
                 viewer = page.wait_for_selector(".gesturelib-viewer canvas", timeout=300_000)
             except Exception:
                 page.screenshot(path=OUT / "failed.png")
                 raise
             page.wait_for_selector("text=notebook run time", timeout=300_000)  # all cells done
-            for button in page.locator("text=No").all():  # JupyterLab's question about its news
+            news = page.get_by_role("button", name="No", exact=True)  # JupyterLab asks about news
+            for button in news.all():
                 button.click()
             viewer.scroll_into_view_if_needed()
             explorer = (
