@@ -24,7 +24,6 @@ function render({ model, el }) {
     for (let i = 0; i < motions.length; i += 3)
       high = Math.max(high, Math.hypot(motions[i], motions[i + 1], motions[i + 2]));
     limits = high * 1.15;
-    audio.src = model.get("audio");
     drawTimeline(); draw();
   }
   function joint(k, t, j) {
@@ -106,7 +105,9 @@ function render({ model, el }) {
   });
   canvas.addEventListener("dblclick", () => { yaw = 0; draw(); });
   model.on("change:motions", load);
+  // The sound is set only when it changes: setting it reloads the player and rewinds it.
   model.on("change:audio", () => { audio.src = model.get("audio"); });
+  audio.src = model.get("audio");
   load();
 }
 export default { render };

@@ -297,12 +297,15 @@ class Explorer:
 
     def add_clip(self, name: str, clip: Clip) -> None:
         """Offer ``clip`` as ``name`` (in place of a clip of that name) and show it."""
-        replaced = name in self.clips and self.clip.value == name
         self.clips[name] = clip
-        self.clip.options = list(self.clips)
-        self.clip.value = name  # samples again through the observer, if the value changes...
-        if replaced:
-            self.update()  # ... which it does not for a new clip under the shown name
+        # New options reset the dropdown to the first; unobserved, that samples nothing.
+        self.clip.unobserve(self._changed, names="value")
+        try:
+            self.clip.options = list(self.clips)
+            self.clip.value = name
+        finally:
+            self.clip.observe(self._changed, names="value")
+        self.update()
 
     def _changed(self, _change) -> None:
         self.update()

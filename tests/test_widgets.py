@@ -3,6 +3,7 @@
 import base64
 import datetime
 import io
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -63,15 +64,18 @@ def test_samples_side_by_side_are_the_first_draws_of_the_seed(explorer):
     explorer.seed.value = 3
     one = explorer.render().motions[1]
     explorer.samples.value = 3  # an observer samples again
-    take = explorer.render()
+    try:
+        take = explorer.render()
+        shown = decoded(explorer.viewer)
+    finally:
+        explorer.samples.value = 1
     assert take.titles == (
         "recorded motion",
         "moglow, sample 1",
         "moglow, sample 2",
         "moglow, sample 3",
     )
-    assert decoded(explorer.viewer).shape[0] == 4
-    explorer.samples.value = 1
+    assert shown.shape[0] == 4
     # Sample 1 of three is sample 1 of one (up to the rounding of batched float32 arithmetic).
     np.testing.assert_allclose(take.motions[1], one, atol=0.01)
     assert np.abs(take.motions[2] - take.motions[1]).max() > 0.1
@@ -128,13 +132,22 @@ def test_an_upload_joins_the_clips_and_a_bad_one_says_why(explorer):
     explorer.upload.value = uploaded("<notes>.wav", b"not audio")
     status = explorer.status.value
     assert "&lt;notes&gt;.wav" in status and "could not be read" in status  # escaped HTML
-    assert "/tmp" not in status  # the upload's name, never the temporary file's
+    assert tempfile.gettempdir() not in status  # the upload's name, never the temporary file's
     assert explorer.clip.value == "mine.flac"
     # The same name again with another recording: the new one is sampled and heard.
     heard = explorer.viewer.audio
     explorer.upload.value = uploaded("mine.flac", (VOICES / "us_clean.flac").read_bytes())
     assert explorer.viewer.audio != heard
     assert explorer.viewer.count == 1 and len(explorer.viewer.activity) > 500  # us_clean: 22 s
+
+
+def test_a_new_clip_is_sampled_once_and_no_other(explorer, monkeypatch):
+    explorer.clip.value = "a voice"  # not the first clip, to which new options reset a dropdown
+    sampled = []
+    render = explorer.render
+    monkeypatch.setattr(explorer, "render", lambda: sampled.append(explorer.clip.value) or render())
+    explorer.add_clip("the same again", explorer.clips["held-out"])
+    assert sampled == ["the same again"] and explorer.clip.value == "the same again"
 
 
 def test_style_sliders_are_off_for_a_model_without_style(explorer):
