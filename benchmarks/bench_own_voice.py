@@ -51,6 +51,8 @@ def main() -> None:
     if args.samples < 1:
         parser.error(f"--samples must be at least 1, got {args.samples}")
     runs = args.runs or [pretrained_folder(name) for name in NAMES]
+    if len({run.name for run in runs}) < len(runs):
+        parser.error("give run folders of different names: the table is headed by them")
     recordings = sorted(VOICES.glob("*.flac"))
 
     results = {}  # run name -> [(ratio, leads) per recording]

@@ -348,7 +348,8 @@ def load_conversation(path_stem: str | os.PathLike) -> Conversation:
     Raises:
         FileNotFoundError: naming the missing file.
         DatasetError: naming the file whose content is damaged, inconsistent or out of range
-            (a truncated file, wrong shapes, NaN motion, activity codes outside 0..3).
+            (a truncated file, wrong shapes, NaN motion, activity codes outside 0..3), or that
+            another version of the generator wrote.
     """
     paths = conversation_paths(path_stem)
     for path in paths.values():

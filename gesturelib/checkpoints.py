@@ -39,8 +39,9 @@ from gesturelib.configs import config_from_dict
 from gesturelib.runtime import device_of
 
 # The version changes whenever a run of older code would load but compute nonsense: 4 is the
-# speech of gesturelib.features.speech_features, normalised per recording (a run of version 3
-# was fitted to the raw log-mel).
+# speech of gesturelib.features.speech_features, normalised per recording. Runs of version 3 made
+# before that change were fitted to the raw log-mel; they cannot be told apart from later ones,
+# so every version-3 run is refused.
 FORMAT, VERSION = "gesturelib-run", 4
 IDENTITY = ("model_class", "model_config", "train_config", "data")
 _LABELS = {

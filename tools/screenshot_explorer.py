@@ -12,6 +12,7 @@ browser download: it drives /usr/bin/chromium). Run from the repository root:
 from __future__ import annotations
 
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -82,8 +83,10 @@ def main() -> int:
             page.screenshot(path=OUT / "opened.png")
             page.keyboard.press("Escape")
             # The menu bar's "Run", not a "Run" in the chapter's text.
-            page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click(timeout=30_000)
-            page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click(timeout=30_000)
+            menu = page.locator(".lm-MenuBar-itemLabel", has_text=re.compile(r"^Run$"))
+            menu.first.click(timeout=30_000)
+            run_all = page.locator(".lm-Menu-itemLabel", has_text=re.compile(r"^Run All Cells$"))
+            run_all.first.click(timeout=30_000)
             try:
                 viewer = page.wait_for_selector(".gesturelib-viewer canvas", timeout=300_000)
             except Exception:
