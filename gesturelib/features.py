@@ -341,9 +341,11 @@ def speech_features(
     model. Frames align as in :func:`mel_spectrogram`; the arguments are the same.
 
     Frames of digital silence (exact zeros, as editors and speech synthesisers write between
-    sentences) hold no sound to measure: they read 0 and play no part in the floor, which
-    otherwise they would pull far below a room's own noise, making its quiet pauses read as
-    speech. A recording of nothing but digital silence reads 0 throughout.
+    sentences) hold no sound to measure: they read 0 and play no part in the floor or the level
+    (nor do the frames beside them, which hold zeros in part,
+    :func:`_measurable`); otherwise they would pull the floor far below a room's own noise,
+    making its quiet pauses read as speech. A recording of nothing but digital silence reads 0
+    throughout.
 
     The statistics are the recording's, so features of a clip cut from a longer recording differ
     slightly from the same frames of the whole: compute them on what the model will hear.
@@ -353,11 +355,20 @@ def speech_features(
     sound = loudness > np.log(MEL_FLOOR) + 1.0  # a nat above the floor of the log: not zeros
     if not sound.any():
         return np.zeros_like(log_mel)
-    quiet = sound & (loudness <= np.percentile(loudness[sound], NOISE_FLOOR_PERCENTILE))
+    measured = _measurable(sound)
+    quiet = measured & (loudness <= np.percentile(loudness[measured], NOISE_FLOOR_PERCENTILE))
     above = log_mel - log_mel[quiet].mean(axis=0)  # (T, n_mels) minus the floor (n_mels,)
     above[~sound] = 0.0
-    level = np.percentile(above[sound].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
+    level = np.percentile(above[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
     return (above / max(float(level), MIN_SPEECH_RANGE)).astype(np.float32)
+
+
+def _measurable(sound: np.ndarray) -> np.ndarray:
+    """The frames ``(T,)`` bool whose level says something about the recording's sound: frames
+    with sound whose neighbours have sound too (a frame beside digital silence holds zeros in
+    part, and reads quieter than the room). All frames with sound where none qualifies."""
+    inner = sound & np.r_[True, sound[:-1]] & np.r_[sound[1:], True]
+    return inner if inner.any() else sound
 
 
 # --------------------------------------------------------------------------- prosody
@@ -433,8 +444,9 @@ def voice_activity(
     frames and :data:`NOISE_MARGIN_DB` above its quietest (the noise floor; never asking more than
     :data:`NOISE_GATE_LIMIT_DB` below the loud frames, so speech without pauses stays voiced); pauses shorter than ``gap_s`` inside speech count as speech (the gaps between syllables
     and words), and stretches of voice shorter than ``blip_s`` do not (clicks). Relative to the
-    recording, so the level it was recorded at does not matter; a recording without any sound
-    (all frames below the energy floor) has no voice.
+    recording, so the level it was recorded at does not matter; digital silence (exact zeros)
+    takes no part in the loud frames or the noise floor, as in :func:`speech_features`, and a
+    recording without any sound (all frames below the energy floor) has no voice.
 
     Args:
         audio, sample_rate, fps: as for :func:`mel_spectrogram`.
@@ -447,11 +459,12 @@ def voice_activity(
     energy_db = 10 * np.log10(
         np.add.reduceat(squares, boundaries[:-1]) / np.diff(boundaries) + ENERGY_FLOOR
     )
-    loud, noise_floor = np.percentile(energy_db, [95, 5])
+    sound = energy_db > 10 * np.log10(ENERGY_FLOOR) + 1  # not digital silence
+    if not sound.any():
+        return np.zeros(n_frames, dtype=bool)
+    loud, noise_floor = np.percentile(energy_db[_measurable(sound)], [95, 5])
     gate = min(noise_floor + NOISE_MARGIN_DB, loud - NOISE_GATE_LIMIT_DB)
-    voiced = (energy_db > max(loud - VOICE_THRESHOLD_DB, gate)) & (
-        energy_db > 10 * np.log10(ENERGY_FLOOR) + 1
-    )
+    voiced = sound & (energy_db > max(loud - VOICE_THRESHOLD_DB, gate))
     voiced = ~_short_runs(~voiced, round(gap_s * fps), keep_ends=True)  # fill short pauses
     return _short_runs(voiced, round(blip_s * fps), keep_ends=False)  # drop short blips
 
@@ -464,9 +477,9 @@ def who_is_talking(
     speaks where its recording holds speech (:func:`voice_activity`).
 
     Raises:
-        AudioError: for unusable audio, a partner's recording of another length than the agent's
-            (by more than a frame), or when neither recording holds speech (the agent would only
-            rest).
+        AudioError: for unusable audio, a partner's recording that covers another number of
+            whole frames than the agent's, or when neither recording holds speech (the agent
+            would only rest).
     """
     speaking = voice_activity(agent, sample_rate, fps)
     listening = np.zeros_like(speaking)

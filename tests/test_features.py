@@ -449,14 +449,20 @@ def test_speech_features_read_silence_as_zero_and_speech_as_one_in_any_noise(noi
     assert 0.8 < np.median(loudness[30:70]) < 1.2
 
 
-def test_digital_silence_neither_sets_the_floor_nor_lifts_a_room_s_pauses():
+@pytest.mark.parametrize("lead_in", [16000, 16600])  # whole frames of zeros, or ending mid-frame
+def test_digital_silence_neither_sets_the_floor_nor_lifts_a_room_s_pauses(lead_in):
     """A second of exact zeros before a noisy recording (an editor's lead-in) changes nothing:
-    the zeros read 0, and the room's noisy pauses still read 0, not as speech."""
-    noisy = speech_between_silences(noise=0.003)
-    alone = features.speech_features(noisy, 16000)
-    led_in = features.speech_features(np.r_[np.zeros(16000, np.float32), noisy], 16000)
-    np.testing.assert_allclose(led_in[:25], 0.0, atol=1e-6)
-    np.testing.assert_allclose(led_in[25:], alone, atol=0.02)
+    the zeros read 0, the room's noisy pauses still read about 0 and hold no voice, and the
+    speech still reads about 1."""
+    noisy = speech_between_silences(noise=0.01)
+    led_in = np.r_[np.zeros(lead_in, np.float32), noisy]
+    alone, heard = (features.speech_features(x, 16000).mean(axis=1) for x in (noisy, led_in))
+    np.testing.assert_allclose(heard[:25], 0.0, atol=1e-6)
+    assert abs(np.median(heard[27:45]) - np.median(alone[2:20])) < 0.02  # the pause
+    assert abs(np.median(heard[56:95]) - np.median(alone[30:70])) < 0.05  # the speech
+    voiced = features.voice_activity(led_in, 16000)
+    assert not voiced[:45].any()
+    assert abs(int(voiced.sum()) - int(features.voice_activity(noisy, 16000).sum())) <= 1
 
 
 def test_speech_features_of_steady_noise_or_silence_stay_small():
