@@ -47,9 +47,9 @@ check-full: setup
 results: setup
 	$(BIN)/python tools/results.py
 
-## make lab: open JupyterLab on the notebooks
+## make lab: open JupyterLab on the notebooks (as root too: containers and Binder run as root)
 lab: setup
-	$(BIN)/jupyter lab notebooks
+	$(BIN)/jupyter lab notebooks $(if $(filter 0,$(shell id -u)),--allow-root)
 
 ## make benchmark: the speed figures quoted in the README
 benchmark: setup

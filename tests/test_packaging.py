@@ -2,6 +2,8 @@
 
 import json
 import re
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -77,3 +79,34 @@ def test_notebooks_are_committed_without_outputs(notebook):
         if cell["cell_type"] == "code":
             assert not cell["outputs"], f"{notebook.name} cell {index} has outputs: run nbstripout"
             assert cell["execution_count"] is None, f"{notebook.name} cell {index} has a count"
+
+
+def test_binder_environment_is_the_course_environment_without_the_editable_install():
+    def entries(path):
+        lines = (ROOT / path).read_text().splitlines()
+        return [line for line in lines if not line.startswith("#") and "--editable ." not in line]
+
+    assert entries("binder/environment.yml") == entries("environment.yml")
+    assert "--editable ." in (ROOT / "binder" / "postBuild").read_text()
+
+
+@pytest.mark.parametrize(
+    ("path", "schema"),
+    [
+        ("CITATION.cff", "vendor.citation-file-format"),
+        (".github/workflows/course.yml", "vendor.github-workflows"),
+    ],
+)
+def test_file_validates_against_its_schema(path, schema):
+    """check-jsonschema ships these schemas, so this needs no network."""
+    command = [sys.executable, "-m", "check_jsonschema", "--builtin-schema", schema, path]
+    checked = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+
+
+def test_licence_is_declared_where_tools_read_it():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["license"] == "MIT"
+    assert (ROOT / "LICENSE").read_text().startswith("MIT License")
+    citation = yaml.safe_load((ROOT / "CITATION.cff").read_text())
+    assert citation["license"] == "MIT" and citation["version"] == project["version"]
