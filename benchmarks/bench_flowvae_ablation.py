@@ -15,7 +15,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import statistics
 from pathlib import Path
@@ -23,31 +22,26 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from data_synth import load_dataset
-from gesturelib.data import make_datasets
+from data_synth import course_data, load_dataset
 from gesturelib.evaluation import generate_for, headline_measures
-from gesturelib.recipes import RECIPES
-from gesturelib.runtime import course_data
-from gesturelib.train import load_or_train
+from gesturelib.pipeline import train_model
 
 REPO = Path(__file__).resolve().parents[1]
 COLUMNS = ("hellinger", "ratio", "lead", "mse", "sample_mse", "minutes")
 
 
-def run(recipe, quick: bool, seed: int, weight: float, splits, datasets, normaliser) -> dict:
+def run(quick: bool, seed: int, weight: float, splits) -> dict:
     """One training run (cached) and its figures."""
-    _, config, training = recipe.settings(quick, seed=seed)
-    model, history = load_or_train(
-        recipe.model_class,
-        dataclasses.replace(config, sample_weight=weight),
-        datasets["train"],
-        datasets["val"],
-        training,
-        REPO / "checkpoints",
-        normaliser,
-        build=lambda c: recipe.make(c, normaliser),
+    trained = train_model(
+        "flowvae",
+        splits,
+        quick=quick,
+        seed=seed,
+        model_changes={"sample_weight": weight},
+        cache=REPO / "checkpoints",
         progress=False,
     )
+    model, history, normaliser = trained.model, trained.history, trained.normaliser
     test = splits["test"]
     motions = generate_for(test, model, normaliser, samples=3, seed=0)
     scores = [headline_measures(test, [m[k] for m in motions]) for k in range(3)]
@@ -68,14 +62,10 @@ def main() -> None:
         parser.error(f"--seeds must be at least 2 (for a spread), got {args.seeds}")
     torch.set_num_threads(1)
     splits = load_dataset(course_data(args.quick))
-    recipe = RECIPES["flowvae"]
-    datasets, normaliser = make_datasets(splits, recipe.settings(args.quick)[0])
     rows = {}
     for label, weight in (("with d(h')", 1.0), ("without", 0.0)):
         for seed in range(args.seeds):
-            rows[label, seed] = row = run(
-                recipe, args.quick, seed, weight, splits, datasets, normaliser
-            )
+            rows[label, seed] = row = run(args.quick, seed, weight, splits)
             print(
                 f"{label:>10} seed {seed}: " + "  ".join(f"{k} {row[k]:.4g}" for k in COLUMNS),
                 flush=True,

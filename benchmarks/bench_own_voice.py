@@ -24,10 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from gesturelib.evaluation import speaking_listening_ratio, stroke_lead
-from gesturelib.features import load_audio, speech_features, who_is_talking
+from gesturelib.features import load_audio
+from gesturelib.pipeline import speech_to_motion
 from gesturelib.pretrained import NAMES, load_run, pretrained_folder
-from gesturelib.sampling import generate
-from gesturelib.skeleton import forward_kinematics
 
 VOICES = Path(__file__).resolve().parents[1] / "tests" / "data" / "voices"
 
@@ -35,12 +34,10 @@ VOICES = Path(__file__).resolve().parents[1] / "tests" / "data" / "voices"
 def on_recording(model, normaliser, recording: Path, samples: int) -> tuple[float, list[float]]:
     """``(speaking/silence ratio, one stroke lead per sample)`` of a model on ``recording``."""
     audio, rate = load_audio(recording)
-    activity = who_is_talking(audio, rate)
-    speech = speech_features(audio, rate)
-    rotations = generate(model, normaliser, speech, activity, samples=samples, seed=0)
-    motions = [forward_kinematics(sample) for sample in rotations]
-    ratio = speaking_listening_ratio(motions, [activity] * samples)
-    return ratio, [stroke_lead(audio, rate, activity, motion) for motion in motions]
+    motion = speech_to_motion(model, normaliser, audio, rate, samples=samples, seed=0)
+    activity = motion.activity
+    ratio = speaking_listening_ratio(list(motion.positions), [activity] * samples)
+    return ratio, [stroke_lead(audio, rate, activity, m) for m in motion.positions]
 
 
 def main() -> None:

@@ -60,6 +60,8 @@ from data_synth.conversation import (
     save_conversation,
 )
 from data_synth.dataset import (
+    course_data,
+    data_folder,
     ensure_dataset,
     load_dataset,
     load_split,
@@ -86,6 +88,8 @@ __all__ = [
     "StyleRanges",
     "TurnConfig",
     "VoiceConfig",
+    "course_data",
+    "data_folder",
     "emphasis_envelope",
     "ensure_dataset",
     "generate_conversation",

@@ -20,8 +20,7 @@ from data_synth.dataset import (
     QUICK_MINUTES,
     write_dataset,
 )
-from gesturelib.cli import OneLineParser
-from gesturelib.runtime import quick_mode
+from gesturelib.runtime import OneLineParser, quick_mode
 
 
 def main(argv: list[str] | None = None) -> int:

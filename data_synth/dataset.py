@@ -392,3 +392,23 @@ def load_dataset(dataset_dir: str | os.PathLike) -> dict[str, list[Conversation]
         DatasetError: (a ``ValueError``) naming the damaged file.
     """
     return {split: load_split(dataset_dir, split) for split in SPLITS}
+
+
+def data_folder(quick: bool) -> Path:
+    """Where the course's synthetic dataset lives: ``data/quick`` or ``data/full`` of the
+    repository (of the working folder when the package is installed outside one); the notebooks
+    share it."""
+    repository = Path(__file__).resolve().parents[1]
+    root = repository if (repository / "pyproject.toml").exists() else Path.cwd()
+    return root / "data" / ("quick" if quick else "full")
+
+
+def course_data(quick: bool, progress: bool = True) -> Path:
+    """:func:`data_folder` with the course's quick or full dataset in it, generated the first
+    time (:func:`ensure_dataset`, which also replaces a stale one)."""
+    minutes, seconds = (
+        (QUICK_MINUTES, QUICK_CONVERSATION_S) if quick else (FULL_MINUTES, FULL_CONVERSATION_S)
+    )
+    folder = data_folder(quick)
+    ensure_dataset(folder, minutes=minutes, seed=0, conversation_s=seconds, progress=progress)
+    return folder

@@ -22,8 +22,10 @@ while saving leaves the previous file whole. Every error a user can meet is a
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import errno
+import functools
 import hashlib
 import json
 import os
@@ -331,3 +333,52 @@ def hash_value(hasher, value) -> None:
 def run_key(identity: dict) -> str:
     """A stable 12-hex-digit hash of a run's identity (what determines the trained model)."""
     return hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:12]
+
+
+#: Modules of the package that cannot change what training computes (they draw, write files or
+#: score motion); every other module's code is part of :func:`code_fingerprint`.
+_PRESENTATION_MODULES = frozenset(
+    {
+        "__main__.py",
+        "bvh.py",
+        "cli.py",
+        "gaps.py",
+        "postprocess.py",
+        "pretrained.py",
+        "toy_densities.py",
+        "viz.py",
+        "widgets.py",
+        "evaluation/figures.py",
+        "evaluation/headline.py",
+        "evaluation/report.py",
+        "evaluation/rules.py",
+        "evaluation/table.py",
+    }
+)
+
+
+@functools.cache
+def code_fingerprint() -> str:
+    """A hash of the code that determines what training computes: every module of gesturelib but
+    the presentation ones, as parsed syntax without docstrings, so that a comment, a docstring or
+    a reformat keeps cached runs, and any other change trains afresh instead of reusing a run of
+    older code."""
+    package = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        name = path.relative_to(package).as_posix()
+        if name in _PRESENTATION_MODULES:
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            body = getattr(node, "body", None)
+            if (
+                isinstance(body, list)
+                and body
+                and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)
+            ):
+                node.body = body[1:] or [ast.Pass()]
+        digest.update(name.encode() + b"\0" + ast.dump(tree).encode() + b"\0")
+    return digest.hexdigest()[:12]

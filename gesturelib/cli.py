@@ -1,4 +1,6 @@
-"""Command line: ``python -m gesturelib <command>`` (also installed as ``gesturelib``).
+"""Command line of the course: train, generate, evaluate, describe and demonstrate its models.
+
+Run as ``python -m gesturelib <command>`` (also installed as ``gesturelib``).
 
 Commands (``docs/architecture.md`` has the contract they share):
     train MODEL --out RUN     train a model of the course into a run folder
@@ -20,28 +22,20 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import shutil
+import secrets
 import sys
 import time
 from pathlib import Path
 
+from gesturelib.runtime import OneLineParser
+
 #: Written into every folder a command fills, so that a second run may replace what the first
 #: made but never files a person put there.
 OUTPUT_MARKER = ".gesturelib-output"
-#: What ``train`` writes into a run folder (``--overwrite`` removes only these).
-RUN_FILES = ("best.pt", "last.pt", "run.json", "autoencoder")
 
 
 class CommandError(Exception):
     """A problem the user can fix; reported as one line, without a traceback."""
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose usage errors are one line on stderr (and exit status 2),
-    like every other error a user can fix; ``--help`` shows the usage."""
-
-    def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
 def _output_folder(out: Path, overwrite: bool, command: str) -> None:
@@ -68,14 +62,17 @@ def _output_folder(out: Path, overwrite: bool, command: str) -> None:
 
 
 def run_train(args) -> Path:
-    """Train ``args.model`` into the run folder ``args.out``; return the folder."""
+    """Train ``args.model`` into the run folder ``args.out``; return the folder.
+
+    Every input (the folder, the data, the device) is checked before anything on disk changes;
+    ``--overwrite`` then replaces only the files of a run: its checkpoints (and its stage one's)
+    and ``run.json``."""
     import torch
 
-    from data_synth import load_dataset
+    from data_synth import course_data, load_dataset
     from gesturelib.checkpoints import FORMAT, VERSION
-    from gesturelib.recipes import RECIPES
-    from gesturelib.runtime import course_data, quick_mode
-    from gesturelib.train import train
+    from gesturelib.pipeline import train_model
+    from gesturelib.runtime import device, quick_mode
 
     quick = args.quick or quick_mode()
     out = Path(args.out)
@@ -89,57 +86,39 @@ def run_train(args) -> Path:
         )
     if args.resume and not (out / "last.pt").exists():
         raise CommandError(f"{out} holds no run to resume (no last.pt)")
-    if args.overwrite:
-        for name in RUN_FILES:
-            path = out / name
-            shutil.rmtree(path) if path.is_dir() else path.unlink(missing_ok=True)
+    device(args.device)
     data = course_data(quick) if args.data is None else Path(args.data)
     splits = load_dataset(data)
     torch.set_num_threads(args.threads)
+    if args.overwrite:
+        (out / "run.json").unlink(missing_ok=True)
 
-    recipe = RECIPES[args.model]
-    inner = None
-    if recipe.stage_one is not None:  # e.g. the autoencoder of aud2repr2pose, in a subfolder
-        print(f"Stage 1: {recipe.stage_one}")
-        inner = _fit(
-            RECIPES[recipe.stage_one], splits, quick, args, out / "autoencoder", None, train
-        )[0]
     started = time.perf_counter()
-    model, history, normaliser = _fit(recipe, splits, quick, args, out, inner, train)
+    trained = train_model(
+        args.model,
+        splits,
+        quick=quick,
+        seed=args.seed,
+        train_changes={"device": args.device},
+        out=out,
+        overwrite=args.overwrite,
+    )
     summary = {
         "format": FORMAT,
         "version": VERSION,
         "model": args.model,
-        "model_class": type(model).__name__,
+        "model_class": type(trained.model).__name__,
         "quick": quick,
         "data": str(data.resolve()),
         "seed": args.seed,
-        "epochs": history.epochs,
-        "best_epoch": history.best_epoch,
-        "training_seconds": round(sum(history.epoch_seconds), 1),
+        "epochs": trained.history.epochs,
+        "best_epoch": trained.history.best_epoch,
+        "training_seconds": round(sum(trained.history.epoch_seconds), 1),
         "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     (out / "run.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(f"Trained {args.model} in {time.perf_counter() - started:.0f} s; run folder {out}/")
     return out
-
-
-def _fit(recipe, splits, quick: bool, args, folder: Path, inner, train):
-    from gesturelib.data import make_datasets
-
-    windows, config, train_config = recipe.settings(quick, seed=args.seed, device=args.device)
-    datasets, normaliser = make_datasets(splits, windows)
-    model = recipe.make(config, normaliser, inner)
-    history = train(
-        model,
-        datasets["train"],
-        datasets["val"],
-        train_config,
-        folder,
-        normaliser=normaliser,
-        overwrite=args.overwrite,
-    )
-    return model, history, normaliser
 
 
 # ---------------------------------------------------------------------------------------------
@@ -150,10 +129,9 @@ def _fit(recipe, splits, quick: bool, args, folder: Path, inner, train):
 def run_generate(args) -> list[Path]:
     """Generate motion for a recording with a trained run; return the files written."""
     from data_synth import load_conversation
-    from gesturelib.features import AudioError, load_audio, speech_features, who_is_talking
+    from gesturelib.features import AudioError, load_audio
+    from gesturelib.pipeline import speech_to_motion
     from gesturelib.pretrained import load_run
-    from gesturelib.sampling import generate
-    from gesturelib.skeleton import forward_kinematics
 
     model, normaliser, _ = load_run(args.run, args.device)
     if not hasattr(model, "step"):
@@ -162,49 +140,48 @@ def run_generate(args) -> list[Path]:
         )
     if args.partner is not None and args.audio is None:
         raise CommandError("--partner goes with --audio (a conversation brings both voices)")
+    if args.style and not getattr(model.config, "style", False):
+        raise CommandError(f"{args.run} was trained without style control; drop --style")
+    style = _parse_style(args.style or [])
     if args.audio is not None:
         audio, sample_rate = load_audio(args.audio)
         partner = None if args.partner is None else load_audio(args.partner, sample_rate)[0]
-        try:
-            activity = who_is_talking(audio, sample_rate, partner)
-        except AudioError as error:
-            heard = args.audio if args.partner is None else f"{args.audio} with {args.partner}"
-            raise CommandError(f"{heard}: {error}") from error
-        if partner is not None:
-            audio = _mix(audio, partner)
+        activity, heard = (
+            None,
+            args.audio if partner is None else f"{args.audio} with {args.partner}",
+        )
     else:
         conversation = load_conversation(args.conversation)  # its motion is never read
-        audio, sample_rate, activity = (
-            conversation.audio,
-            conversation.sample_rate,
-            conversation.activity,
+        audio, sample_rate, partner = conversation.audio, conversation.sample_rate, None
+        activity, heard = conversation.activity, args.conversation
+    try:
+        motion = speech_to_motion(
+            model,
+            normaliser,
+            audio,
+            sample_rate,
+            partner=partner,
+            activity=activity,
+            style=style,
+            samples=args.samples,
+            temperature=args.temperature,
+            seed=args.seed,
         )
-    style = None
-    if args.style:
-        if not getattr(model.config, "style", False):
-            raise CommandError(f"{args.run} was trained without style control; drop --style")
-        style = normaliser.style_at_percentiles(_parse_style(args.style))
-    speech = speech_features(audio, sample_rate)
-    rotations = generate(
-        model,
-        normaliser,
-        speech,
-        activity,
-        samples=args.samples,
-        temperature=args.temperature,
-        seed=args.seed,
-        style=style,
-    )
+    except AudioError as error:
+        raise CommandError(f"{heard}: {error}") from error
     out = Path(args.out)
     _output_folder(out, args.overwrite, "generate")
     written = []
-    for number, sample in enumerate(rotations, start=1):
+    for number, (rotations, positions) in enumerate(
+        zip(motion.rotations, motion.positions, strict=True), start=1
+    ):
         folder = out if args.samples == 1 else out / f"sample-{number}"
         folder.mkdir(exist_ok=True)
-        positions = forward_kinematics(sample)
-        written += _write_motion(folder, sample, positions, activity)
+        written += _write_motion(folder, rotations, positions, motion.activity)
         if not args.no_video:
-            written.append(_render([positions], ["the agent"], audio, sample_rate, folder))
+            written.append(
+                _render([positions], ["the agent"], motion.audio, motion.sample_rate, folder)
+            )
     return written
 
 
@@ -224,17 +201,6 @@ def _write_motion(folder: Path, rotations, positions, activity) -> list[Path]:
         fps=np.int64(FPS),
     )
     return [folder / "motion.npz", write_bvh(folder / "agent.bvh", rotations)]
-
-
-def _mix(agent, partner):
-    """Both voices in one track ``(n,)``: their sum, scaled down only if it would clip (trimmed
-    to the shorter recording)."""
-    import numpy as np
-
-    n = min(len(agent), len(partner))
-    both = agent[:n] + partner[:n]
-    peak = float(np.abs(both).max())
-    return both / peak if peak > 1.0 else both
 
 
 def _parse_style(pairs: list[str]) -> dict[str, float]:
@@ -317,6 +283,7 @@ def run_evaluate(args) -> list[Path]:
     _output_folder(out, args.overwrite, "evaluate")
     torch.set_num_threads(args.threads)
 
+    print(f"The FGD's motion-feature network for this data (trained once, cached in {args.cache}/)")
     features = feature_network(
         [c.positions for c in splits["train"]],
         [c.positions for c in splits["val"]],
@@ -384,7 +351,7 @@ def _common_name(names: list[str], model) -> str:
 def _evaluation_data(args, quick: bool, groups: dict) -> Path:
     """The dataset to evaluate on: ``--data``, else the one the runs were trained on, else the
     course's synthetic one (generated if absent)."""
-    from gesturelib.runtime import course_data
+    from data_synth import course_data
 
     if args.data is not None:
         return Path(args.data)
@@ -423,24 +390,31 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
 
     from data_synth import generate_conversation, save_conversation
     from gesturelib import viz
-    from gesturelib.features import mel_spectrogram, speech_features
+    from gesturelib.features import mel_spectrogram
+    from gesturelib.pipeline import speech_to_motion
     from gesturelib.pretrained import load_run, pretrained_folder
-    from gesturelib.sampling import generate
-    from gesturelib.skeleton import forward_kinematics
 
     if seconds <= 0:
         raise CommandError(f"--seconds must be positive, got {seconds}")
     model, normaliser, _ = load_run(pretrained_folder("moglow"))
     _output_folder(out, overwrite, "demo")
-    print(f"Generating a {seconds:g} s conversation (seed {seed}) ...")
+    print(
+        f"Generating a {seconds:g} s conversation (seed {seed}; --seed {seed} draws it again) ..."
+    )
     conversation = generate_conversation(seconds, seed=seed)
     written = save_conversation(conversation, out / "conversation", overwrite=True)
 
     print("The shipped MoGlow moves the agent to the conversation's speech ...")
-    speech = speech_features(conversation.audio, conversation.sample_rate)
-    rotations = generate(model, normaliser, speech, conversation.activity, seed=seed)[0]
-    positions = forward_kinematics(rotations)
-    written += _write_motion(out, rotations, positions, conversation.activity)
+    motion = speech_to_motion(
+        model,
+        normaliser,
+        conversation.audio,
+        conversation.sample_rate,
+        activity=conversation.activity,
+        seed=seed,
+    )
+    positions = motion.positions[0]
+    written += _write_motion(out, motion.rotations[0], positions, conversation.activity)
     print("Rendering the recorded motion and MoGlow's side by side, with the speech ...")
     motions = [conversation.positions, positions]
     titles = ["recorded (the generator's rules)", "MoGlow (shipped model)"]
@@ -561,7 +535,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     demo.add_argument("--out", type=Path, default=Path("outputs/demo"), help="output folder")
     demo.add_argument("--seconds", type=float, default=20.0, help="length of the conversation")
-    demo.add_argument("--seed", type=_at_least(0), default=0, help="seed of the conversation")
+    demo.add_argument(
+        "--seed",
+        type=_at_least(0),
+        help="seed of the conversation and the motion (default: a new one, printed)",
+    )
     demo.add_argument(
         "--overwrite", action="store_true", help="write into a folder of others' files"
     )
@@ -587,7 +565,8 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "info":
             print(run_info(args))
         else:
-            files = run_demo(args.out, args.seconds, args.seed, args.overwrite)
+            seed = secrets.randbelow(10_000) if args.seed is None else args.seed
+            files = run_demo(args.out, args.seconds, seed, args.overwrite)
             print(f"\nWrote {len(files)} files to {args.out}/:")
             for path in files:
                 print(f"  {path.name}")

@@ -511,8 +511,11 @@ def frechet_distance(features_a, features_b) -> float:
     sqrt_cov_a = _sqrt_psd(cov_a)
     eigenvalues = np.linalg.eigvalsh(sqrt_cov_a @ cov_b @ sqrt_cov_a)
     trace_sqrt = np.sum(np.sqrt(np.clip(eigenvalues, 0.0, None)))
-    distance = np.sum((mean_a - mean_b) ** 2) + np.trace(cov_a) + np.trace(cov_b) - 2.0 * trace_sqrt
-    return float(max(distance, 0.0))
+    spread = np.trace(cov_a) + np.trace(cov_b)
+    distance = np.sum((mean_a - mean_b) ** 2) + spread - 2.0 * trace_sqrt
+    # Below the rounding error of the terms that cancel (identical sets): exactly zero.
+    scale = spread + np.sum(mean_a**2) + np.sum(mean_b**2)
+    return float(distance) if distance > 1e-9 * scale else 0.0
 
 
 def _sqrt_psd(matrix: np.ndarray) -> np.ndarray:

@@ -74,13 +74,23 @@ class Recipe:
     stage_one: str | None = None
     build: Callable | None = None
 
-    def settings(self, quick: bool, **train_changes) -> tuple[WindowConfig, Any, TrainConfig]:
-        """``(windows, model_config, train_config)`` for full or quick mode; ``train_changes``
-        override training fields (the seed, the device)."""
+    def settings(
+        self, quick: bool, model_changes: dict | None = None, **train_changes
+    ) -> tuple[WindowConfig, Any, TrainConfig]:
+        """``(windows, model_config, train_config)`` for full or quick mode.
+
+        ``model_changes`` override model-config fields (a chapter's variant); the window fields
+        the model config shares (past poses, speech context) follow the changed config, so the
+        data always fits the model. ``train_changes`` override training fields (the seed, the
+        device, the epochs)."""
+        config = self.quick_model_config if quick else self.model_config
+        config = dataclasses.replace(config, **(model_changes or {}))
+        windows = self.quick_windows if quick else self.windows
+        shared = {f: getattr(config, f) for f in _SHARED_WINDOW_FIELDS if hasattr(config, f)}
         train = self.quick_train_config if quick else self.train_config
         return (
-            self.quick_windows if quick else self.windows,
-            self.quick_model_config if quick else self.model_config,
+            dataclasses.replace(windows, **shared),
+            config,
             dataclasses.replace(train, **train_changes),
         )
 
@@ -91,6 +101,8 @@ class Recipe:
         return self.build(config, normaliser, stage_one_model)
 
 
+#: Fields of a training window that a model config may hold too; the config's value wins.
+_SHARED_WINDOW_FIELDS = ("past_poses", "speech_past", "speech_future")
 _EXCERPTS = WindowConfig(sequence_length=100, stride=50)
 _QUICK_EXCERPTS = WindowConfig(sequence_length=50, stride=25)
 _FLOW_TRAINING = TrainConfig(epochs=30, batch_size=16, warmup_steps=500, patience=8)
@@ -100,7 +112,46 @@ _QUICK_REGRESSOR_TRAINING = TrainConfig.quick(epochs=4, batch_size=32, warmup_st
 _FRAMES = WindowConfig(sequence_length=1, stride=8)
 _QUICK_FRAMES = WindowConfig(sequence_length=1, stride=6)
 
+#: Every trainable model of the course, in the order of the chapters.
 RECIPES: dict[str, Recipe] = {
+    "aud2pose": Recipe(
+        Aud2Pose,
+        _FRAMES,
+        _QUICK_FRAMES,
+        Aud2PoseConfig(),
+        Aud2PoseConfig.quick(),
+        _REGRESSOR_TRAINING,
+        _QUICK_REGRESSOR_TRAINING,
+    ),
+    "motion_dae": Recipe(
+        MotionDenoisingAutoencoder,
+        WindowConfig(sequence_length=25, stride=10),
+        WindowConfig(sequence_length=25, stride=10),
+        MotionDAEConfig(),
+        MotionDAEConfig.quick(),
+        TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5),
+        TrainConfig.quick(epochs=8, batch_size=16, warmup_steps=100),
+    ),
+    "aud2repr2pose": Recipe(
+        Aud2Repr2Pose,
+        _FRAMES,
+        _QUICK_FRAMES,
+        Aud2Repr2PoseConfig(),
+        Aud2Repr2PoseConfig.quick(),
+        _REGRESSOR_TRAINING,
+        _QUICK_REGRESSOR_TRAINING,
+        stage_one="motion_dae",
+        build=lambda config, _, autoencoder: Aud2Repr2Pose.from_autoencoder(autoencoder, config),
+    ),
+    "cvae": Recipe(
+        CVAE,
+        WindowConfig(sequence_length=50, stride=25),
+        WindowConfig(sequence_length=50, stride=10),
+        CVAEConfig(),
+        CVAEConfig.quick(),
+        TrainConfig(epochs=20, batch_size=32, warmup_steps=200, patience=5),
+        TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=100),
+    ),
     "moglow": Recipe(
         MoGlow,
         _EXCERPTS,
@@ -130,33 +181,6 @@ RECIPES: dict[str, Recipe] = {
         _QUICK_FLOW_TRAINING,
         build=lambda config, normaliser, _: VariationalFlowVAE(config, normaliser),
     ),
-    "cvae": Recipe(
-        CVAE,
-        WindowConfig(sequence_length=50, stride=25),
-        WindowConfig(sequence_length=50, stride=10),
-        CVAEConfig(),
-        CVAEConfig.quick(),
-        TrainConfig(epochs=20, batch_size=32, warmup_steps=200, patience=5),
-        TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=100),
-    ),
-    "aud2pose": Recipe(
-        Aud2Pose,
-        _FRAMES,
-        _QUICK_FRAMES,
-        Aud2PoseConfig(),
-        Aud2PoseConfig.quick(),
-        _REGRESSOR_TRAINING,
-        _QUICK_REGRESSOR_TRAINING,
-    ),
-    "motion_dae": Recipe(
-        MotionDenoisingAutoencoder,
-        WindowConfig(sequence_length=25, stride=10),
-        WindowConfig(sequence_length=25, stride=10),
-        MotionDAEConfig(),
-        MotionDAEConfig.quick(),
-        TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5),
-        TrainConfig.quick(epochs=8, batch_size=16, warmup_steps=100),
-    ),
     "imputation_dae": Recipe(
         MotionDenoisingAutoencoder,
         WindowConfig(sequence_length=25, stride=5, past_poses=0),
@@ -166,51 +190,12 @@ RECIPES: dict[str, Recipe] = {
         TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5, drop_last=True),
         TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=50, drop_last=True),
     ),
-    "aud2repr2pose": Recipe(
-        Aud2Repr2Pose,
-        _FRAMES,
-        _QUICK_FRAMES,
-        Aud2Repr2PoseConfig(),
-        Aud2Repr2PoseConfig.quick(),
-        _REGRESSOR_TRAINING,
-        _QUICK_REGRESSOR_TRAINING,
-        stage_one="motion_dae",
-        build=lambda config, _, autoencoder: Aud2Repr2Pose.from_autoencoder(autoencoder, config),
-    ),
 }
+
+#: The recipes whose models generate motion (:mod:`gesturelib.sampling`'s protocol), in order.
+GENERATORS: tuple[str, ...] = tuple(n for n, r in RECIPES.items() if hasattr(r.model_class, "step"))
 
 #: The models a run folder can hold, by class name (what ``generate`` and ``info`` load).
 MODEL_CLASSES: dict[str, type[nn.Module]] = {
     r.model_class.__name__: r.model_class for r in RECIPES.values()
 }
-
-
-def trained(name: str, splits, quick: bool, cache_dir, seed: int = 0, progress: bool = False):
-    """The model of recipe ``name`` trained on ``splits`` (a dataset's ``{"train": [...],
-    "val": [...], ...}`` conversations) from ``seed``, through the shared load-or-train cache in
-    ``cache_dir`` (a stage-one model first, where the recipe has one).
-
-    Returns:
-        ``(model, history, normaliser)``.
-    """
-    from gesturelib.data import make_datasets
-    from gesturelib.train import load_or_train
-
-    recipe = RECIPES[name]
-    inner = None
-    if recipe.stage_one is not None:
-        inner = trained(recipe.stage_one, splits, quick, cache_dir, seed, progress)[0]
-    windows, config, training = recipe.settings(quick, seed=seed)
-    datasets, normaliser = make_datasets(splits, windows)
-    model, history = load_or_train(
-        recipe.model_class,
-        config,
-        datasets["train"],
-        datasets["val"],
-        training,
-        cache_dir,
-        normaliser,
-        build=lambda c: recipe.make(c, normaliser, inner),
-        progress=progress,
-    )
-    return model, history, normaliser

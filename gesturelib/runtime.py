@@ -1,4 +1,5 @@
-"""Run-time switches shared by notebooks, the command line and CI: quick mode, seeds, devices.
+"""Run-time switches shared by notebooks, the command lines and CI: quick mode, seeds, devices,
+and the one-line usage errors of every command line.
 
 Quick mode is one environment variable, ``GESTURELIB_QUICK``; CI sets it to 1 so that every
 notebook runs on less data and fewer training steps, through the same code path. Random draws
@@ -7,9 +8,9 @@ take explicit generators (:func:`standard_normal`), and devices are named once (
 
 from __future__ import annotations
 
+import argparse
 import os
 import random
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -86,28 +87,9 @@ def device_of(module: torch.nn.Module) -> torch.device:
     return torch.device("cpu") if parameter is None else parameter.device
 
 
-def data_folder(quick: bool) -> Path:
-    """Where the synthetic dataset lives: ``data/quick`` or ``data/full`` of the repository (of
-    the working folder when gesturelib is installed outside one); the notebooks share it."""
-    repository = Path(__file__).resolve().parents[1]
-    root = repository if (repository / "pyproject.toml").exists() else Path.cwd()
-    return root / "data" / ("quick" if quick else "full")
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line on stderr (and exit status 2),
+    like every other error a user can fix; ``--help`` shows the usage."""
 
-
-def course_data(quick: bool, progress: bool = True) -> Path:
-    """:func:`data_folder` with the course's quick or full synthetic dataset in it, generated the
-    first time (``data_synth.ensure_dataset``, which also replaces a stale one)."""
-    from data_synth import ensure_dataset
-    from data_synth.dataset import (
-        FULL_CONVERSATION_S,
-        FULL_MINUTES,
-        QUICK_CONVERSATION_S,
-        QUICK_MINUTES,
-    )
-
-    folder = data_folder(quick)
-    minutes, seconds = (
-        (QUICK_MINUTES, QUICK_CONVERSATION_S) if quick else (FULL_MINUTES, FULL_CONVERSATION_S)
-    )
-    ensure_dataset(folder, minutes=minutes, seed=0, conversation_s=seconds, progress=progress)
-    return folder
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")

@@ -44,6 +44,7 @@ from tqdm.auto import tqdm
 from gesturelib.checkpoints import (
     VERSION,
     RunFolder,
+    code_fingerprint,
     dataset_fingerprint,
     load_state,
     read_checkpoint,
@@ -204,7 +205,12 @@ def train(
         run = _Run(model, optimizer, folder, normaliser)
         epochs_before = run.epoch
         total = len(_batches(train_data, config, 1)) * config.epochs
-        bar = tqdm(total=total, initial=min(run.step, total), disable=not progress)
+        bar = tqdm(
+            total=total,
+            initial=min(run.step, total),
+            disable=not progress,
+            desc=f"training {type(model).__name__}",
+        )
         try:
             with bar:
                 for epoch in range(run.epoch + 1, config.epochs + 1):
@@ -445,6 +451,14 @@ def _identity(model: nn.Module, config: TrainConfig, data: str) -> dict:
     }
 
 
+def build_seeded(build: Callable[[Any], nn.Module], config, seed: int) -> nn.Module:
+    """``build(config)`` with PyTorch's random draws (the initial weights) seeded by ``seed``
+    alone, neither depending on nor disturbing the caller's random state."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return build(config)
+
+
 def load_or_train(
     model_class: type[nn.Module],
     model_config,
@@ -461,11 +475,12 @@ def load_or_train(
     """The model trained on this data with these configs: loaded if cached, else trained.
 
     The run lives in ``cache_dir/<ModelName>-<hash>/``, the hash covering the model class and
-    config, the training config (not its device or workers), the data and the run format's
-    version, so another notebook asking for the same gets the same files, and a newer version of
-    the code trains afresh beside the old files instead of tripping over them. A finished run loads at once from its ``best.pt``;
-    an interrupted one resumes from ``last.pt``; a missing one is trained from initial weights
-    drawn with ``train_config.seed``.
+    config, the training config (not its device or workers), the data, the run format's version
+    and the code that trains it (:func:`~gesturelib.checkpoints.code_fingerprint`), so another
+    notebook asking for the same gets the same files, and changed code trains afresh beside the
+    old files instead of reusing a run it would not make. A finished run loads at once from its
+    ``best.pt``; an interrupted one resumes from ``last.pt``; a missing one is trained from
+    initial weights drawn with ``train_config.seed``.
 
     Args:
         model_class: follows the model protocol; built as ``model_class(model_config)``.
@@ -483,9 +498,7 @@ def load_or_train(
         ``(model, history)``: the model with its best weights, on ``train_config.device``, in
         eval mode, and how its training went.
     """
-    with torch.random.fork_rng(devices=[]):  # the initial weights depend on the seed alone
-        torch.manual_seed(train_config.seed)
-        model = model_class(model_config) if build is None else build(model_config)
+    model = build_seeded(build or model_class, model_config, train_config.seed)
     if not isinstance(model, model_class):
         raise TypeError(f"build must return a {model_class.__name__}, got {type(model).__name__}")
     fingerprint = data_fingerprint or dataset_fingerprint(train_data, val_data)
@@ -493,7 +506,9 @@ def load_or_train(
         fingerprint = run_key({"data": fingerprint, "initial_state": state_fingerprint(model)})
     identity = _identity(model, train_config, fingerprint)
     key_config = {k: v for k, v in identity["train_config"].items() if k not in EXECUTION_FIELDS}
-    key = run_key({**identity, "train_config": key_config, "version": VERSION})
+    key = run_key(
+        {**identity, "train_config": key_config, "version": VERSION, "code": code_fingerprint()}
+    )
     folder = Path(cache_dir) / f"{model_class.__name__}-{key}"
     best = RunFolder(folder, identity).best
     if best.exists():

@@ -34,9 +34,9 @@ import soundfile
 import traitlets
 
 from gesturelib.conventions import FPS, Activity
-from gesturelib.features import AudioError, load_audio, speech_features, who_is_talking
-from gesturelib.sampling import generate
-from gesturelib.skeleton import BONES, forward_kinematics
+from gesturelib.features import AudioError, load_audio, who_is_talking
+from gesturelib.pipeline import speech_to_motion
+from gesturelib.skeleton import BONES
 from gesturelib.style import STYLE_FEATURES
 from gesturelib.viz import ACTIVITY_COLOURS, MIN_ANIMATION_WIDTH_PX, SIDE_COLOURS, bone_colour
 
@@ -251,23 +251,21 @@ class Explorer:
         forced = TALKING[self.talking.value]
         activity = clip.activity if forced is None else np.full_like(clip.activity, forced)
         has_style = getattr(model.config, "style", False)
-        style = None
-        if has_style:
-            style = normaliser.style_at_percentiles({n: s.value for n, s in self.style.items()})
+        style = {n: s.value for n, s in self.style.items()} if has_style else None
         started = time.perf_counter()
-        speech = speech_features(clip.audio, clip.sample_rate)
-        rotations = generate(
+        motion = speech_to_motion(
             model,
             normaliser,
-            speech,
-            activity,
+            clip.audio,
+            clip.sample_rate,
+            activity=activity,
+            style=style,
             samples=self.samples.value,
             temperature=self.temperature.value,
             seed=self.seed.value,
-            style=style,
         )
         sampling_s = time.perf_counter() - started
-        motions = [forward_kinematics(sample).astype(np.float32) for sample in rotations]
+        motions = list(motion.positions.astype(np.float32))
         name = self.model.value
         titles = (
             [name]

@@ -26,7 +26,7 @@ def test_demo_writes_a_video_with_sound_pictures_and_the_raw_files(demo_folder):
 
 
 def test_demo_runs_again_into_its_own_folder(demo_folder):
-    assert main(["demo", "--out", str(demo_folder), "--seconds", "2"]) == 0
+    assert main(["demo", "--out", str(demo_folder), "--seconds", "2", "--seed", "3"]) == 0
 
 
 def test_demo_never_writes_into_a_folder_of_other_files(tmp_path, capsys):
@@ -325,3 +325,16 @@ def test_generate_refuses_a_recording_without_speech(moglow_run, tmp_path, capsy
     assert main([*args, "--out", str(tmp_path / "o")]) == 2
     error = capsys.readouterr().err
     assert "holds no speech" in error and error.count("\n") == 1
+
+
+def test_demo_draws_a_new_conversation_unless_given_a_seed(tmp_path, capsys):
+    seeds, audio = [], []
+    for args in ([], [], ["--seed", None]):
+        out = tmp_path / f"demo-{len(audio)}"
+        args = [a if a is not None else str(seeds[0]) for a in args]
+        assert main(["demo", "--out", str(out), "--seconds", "4.5", *args]) == 0
+        seeds.append(int(capsys.readouterr().out.split("(seed ")[1].split(";")[0]))
+        audio.append(load_audio(out / "conversation.wav")[0])
+    assert seeds[2] == seeds[0]  # the printed seed draws the conversation again
+    np.testing.assert_array_equal(audio[2], audio[0])
+    assert (seeds[0] == seeds[1]) == np.array_equal(audio[0], audio[1])

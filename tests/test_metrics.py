@@ -301,6 +301,15 @@ def test_frechet_distance_closed_forms():
     assert frechet_distance(a, b) == pytest.approx(expected)
 
 
+def test_frechet_distance_of_a_set_to_itself_is_exactly_zero_at_any_scale():
+    rng = np.random.default_rng(10)
+    for scale in (1e-3, 1.0, 1e4):
+        features = scale * (rng.normal(size=(500, 32)) @ rng.normal(size=(32, 32)) + 5.0)
+        assert frechet_distance(features, features) == 0.0
+        # ... while a shift far smaller than the spread is still seen.
+        assert frechet_distance(features, features + 1e-3 * scale) > 0.0
+
+
 def test_frechet_distance_is_symmetric_and_matches_the_sqrtm_formula():
     rng = np.random.default_rng(8)
     a = rng.normal(size=(300, 5))
@@ -316,7 +325,7 @@ def test_frechet_distance_is_symmetric_and_matches_the_sqrtm_formula():
 def test_frechet_distance_with_singular_covariance():
     rng = np.random.default_rng(9)
     few = rng.normal(size=(3, 6))  # 3 samples in 6 dimensions: covariance of rank 2
-    assert frechet_distance(few, few) == pytest.approx(0.0, abs=1e-8)
+    assert frechet_distance(few, few) == 0.0
     distance = frechet_distance(few, rng.normal(size=(4, 6)))
     assert np.isfinite(distance) and distance > 0
 

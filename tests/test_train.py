@@ -694,3 +694,25 @@ def test_load_or_train_refuses_a_build_of_another_class(tmp_path):
             progress=False,
         )
     assert not any(tmp_path.iterdir())
+
+
+def test_the_code_fingerprint_ignores_docstrings_and_sees_code(tmp_path, monkeypatch):
+    import gesturelib.checkpoints as checkpoints
+
+    package = tmp_path / "gesturelib"
+    package.mkdir()
+    module = package / "model.py"
+    fake = package / "checkpoints.py"
+    fake.write_text("")
+
+    def fingerprint(source):
+        module.write_text(source)
+        checkpoints.code_fingerprint.cache_clear()
+        monkeypatch.setattr(checkpoints, "__file__", str(fake))
+        return checkpoints.code_fingerprint()
+
+    base = fingerprint('"""A model."""\n\ndef f(x):\n    """Twice."""\n    return 2 * x\n')
+    reworded = fingerprint('"""Another word."""\n\n\ndef f(x):  # a comment\n    return 2 * x\n')
+    changed = fingerprint('"""A model."""\n\ndef f(x):\n    """Twice."""\n    return 3 * x\n')
+    checkpoints.code_fingerprint.cache_clear()
+    assert base == reworded != changed

@@ -16,11 +16,10 @@ from pathlib import Path
 
 import torch
 
-from data_synth.dataset import load_dataset
+from data_synth.dataset import course_data, load_dataset
 from gesturelib.checkpoints import read_checkpoint
+from gesturelib.pipeline import train_model
 from gesturelib.pretrained import NAMES, PRETRAINED_DIR, export_run
-from gesturelib.recipes import trained
-from gesturelib.runtime import course_data
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 
@@ -40,9 +39,7 @@ def run_folder_of(model: torch.nn.Module) -> Path:
 def main() -> int:
     splits = load_dataset(course_data(quick=False))
     for name in NAMES:
-        model, _, _ = trained(
-            name, splits, quick=False, cache_dir=CHECKPOINTS, seed=0, progress=True
-        )
+        model = train_model(name, splits, quick=False, seed=0, cache=CHECKPOINTS).model
         path = export_run(run_folder_of(model), PRETRAINED_DIR / name, overwrite=True)
         print(f"{path}: {path.stat().st_size / 1e6:.1f} MB")
     return 0

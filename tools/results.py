@@ -26,16 +26,15 @@ from pathlib import Path
 
 import torch
 
-from data_synth import load_dataset
+from data_synth import course_data, load_dataset
 from gesturelib.evaluation import report
 from gesturelib.evaluation.fgd import feature_network
 from gesturelib.evaluation.table import evaluate_models
-from gesturelib.recipes import trained
-from gesturelib.runtime import course_data
+from gesturelib.pipeline import train_model
+from gesturelib.recipes import GENERATORS
 
 REPO = Path(__file__).resolve().parents[1]
-#: The generating models of the course, in the order of the chapters.
-MODELS = ("aud2pose", "aud2repr2pose", "cvae", "moglow", "flowvae", "flowvae_elbo")
+MODELS = GENERATORS  # every model of the course that generates motion, in chapter order
 MARKERS = ("<!-- results:start -->", "<!-- results:end -->")
 
 
@@ -68,9 +67,11 @@ def main() -> int:
     for name in args.models:
         for seed in range(args.seeds):
             print(f"{name}, seed {seed} ...", flush=True)
-            model, history, normaliser = trained(name, splits, args.quick, cache, seed=seed)
-            models.setdefault(name, []).append((model, normaliser))
-            histories.setdefault(name, []).append((model, history))
+            run = train_model(
+                name, splits, quick=args.quick, seed=seed, cache=cache, progress=False
+            )
+            models.setdefault(name, []).append((run.model, run.normaliser))
+            histories.setdefault(name, []).append((run.model, run.history))
     print(f"Models ready after {(time.perf_counter() - started) / 60:.1f} min")
     if set(args.models) != set(MODELS):
         return 0

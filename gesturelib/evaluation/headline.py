@@ -141,17 +141,15 @@ def reference_motions(
 
 def generate_for(conversations, model, normaliser, **options) -> list[np.ndarray]:
     """Keypoints ``(samples, T, 9, 3)`` generated for each conversation from its audio and who is
-    talking (never its motion); ``options`` as for :func:`gesturelib.sampling.generate`."""
-    from gesturelib.features import speech_features
-    from gesturelib.sampling import generate
-    from gesturelib.skeleton import forward_kinematics
+    talking (never its motion); ``options`` as for :func:`gesturelib.pipeline.speech_to_motion`."""
+    from gesturelib.pipeline import speech_to_motion
 
-    motions = []
-    for conversation in conversations:
-        speech = speech_features(conversation.audio, conversation.sample_rate)
-        rotations = generate(model, normaliser, speech, conversation.activity, **options)
-        motions.append(forward_kinematics(rotations))
-    return motions
+    return [
+        speech_to_motion(
+            model, normaliser, c.audio, c.sample_rate, activity=c.activity, **options
+        ).positions
+        for c in conversations
+    ]
 
 
 def headline_measures(conversations, motions: Sequence[np.ndarray]) -> dict[str, float]:

@@ -126,19 +126,13 @@ def model_rotations(conversations, model, normaliser, samples: int, seed: int = 
     """Limb rotations ``rotations[k][i]`` ``(T, 9, 6)``: sample ``k`` of the model for held-out
     conversation ``i``'s speech and who is talking (never its motion). A deterministic model
     (``noise_dim`` 0) gives one draw, whatever ``samples`` asks."""
-    from gesturelib.features import speech_features
-    from gesturelib.sampling import generate
+    from gesturelib.pipeline import speech_to_motion
 
     drawn = samples if model.noise_dim > 0 else 1
     per_conversation = [
-        generate(
-            model,
-            normaliser,
-            speech_features(c.audio, c.sample_rate),
-            c.activity,
-            samples=drawn,
-            seed=seed,
-        )
+        speech_to_motion(
+            model, normaliser, c.audio, c.sample_rate, activity=c.activity, samples=drawn, seed=seed
+        ).rotations
         for c in conversations
     ]
     return [[rotations[k] for rotations in per_conversation] for k in range(drawn)]
