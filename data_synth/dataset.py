@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from pathlib import Path, PurePosixPath
 
 from tqdm.auto import tqdm
@@ -106,6 +107,11 @@ def write_dataset(
             turns hold no phrase. Nothing is written then.
     """
     minutes, seed, conversation_s, config = _check_arguments(minutes, seed, conversation_s, config)
+    if minutes > MAX_MINUTES:
+        raise ConfigError(
+            f"minutes = {minutes:g} is more than the {MAX_MINUTES:g} minutes (10 hours) a dataset "
+            "of this generator may hold; the course trains on 30"
+        )
     n_conversations = max(3, round(minutes * 60.0 / conversation_s))
     if n_conversations > SEED_STRIDE:
         raise ConfigError(
@@ -117,6 +123,7 @@ def write_dataset(
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"{out_dir} exists and is not a folder")
+    _check_free_space(out_dir, n_conversations * conversation_s * BYTES_PER_SECOND)
 
     # Plan every file first, so that a refusal happens before anything is written.
     plan = []
@@ -171,6 +178,24 @@ def write_dataset(
     text = json.dumps(manifest, indent=1)
     manifest_path.write_text(text)
     return json.loads(text)  # exactly what read_manifest will give (tuples read back as lists)
+
+
+#: The most a dataset may hold, and what a second of conversation takes on disk (its audio,
+#: arrays and metadata: 40 kB, measured on the course's data).
+MAX_MINUTES = 600.0
+BYTES_PER_SECOND = 40_000
+
+
+def _check_free_space(out_dir: Path, needed: float) -> None:
+    """ConfigError if the disk holding ``out_dir`` has less than ``needed`` bytes free (with a
+    margin of a fifth)."""
+    existing = next(p for p in (out_dir, *out_dir.parents) if p.exists())
+    free = shutil.disk_usage(existing).free
+    if free < 1.2 * needed:
+        raise ConfigError(
+            f"the dataset would take about {needed / 1e6:,.0f} MB and {existing} has "
+            f"{free / 1e6:,.0f} MB free; ask for fewer minutes or free some space"
+        )
 
 
 def _check_arguments(minutes, seed, conversation_s, config) -> tuple:

@@ -22,6 +22,8 @@ keypoint is. Angles are written in the channel order Z, X, Y (degrees), the most
 
 from __future__ import annotations
 
+import os
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -72,22 +74,43 @@ def global_rotations(rotations: np.ndarray) -> dict[str, np.ndarray]:
     return world
 
 
-def write_bvh(path: str | Path, rotations: np.ndarray, fps: int = FPS) -> Path:
+def write_bvh(
+    path: str | Path, rotations: np.ndarray, fps: float = FPS, overwrite: bool = False
+) -> Path:
     """Write limb rotations ``(T, 9, 6)`` (relative to the T-pose) as a BVH file.
+
+    The file is written whole or not at all (through a temporary file beside it).
 
     Returns:
         The path written. Its joints' positions are :func:`gesturelib.skeleton.forward_kinematics`
         of ``rotations`` (the root at the origin).
     Raises:
-        ValueError: for rotations of another shape, no frames, or a frame rate below 1.
+        FileExistsError: ``path`` exists and ``overwrite`` is False.
+        ValueError: for rotations of another shape, no frames, values that are not finite
+            numbers, or a frame rate that is not a finite number of at least 1.
+        OSError: naming ``path``, when it cannot be written (a full disk, say).
     """
-    rotations = np.asarray(rotations)
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    try:
+        rotations = np.asarray(rotations, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(
+            f"rotations must be numbers, shape (T, {NUM_JOINTS}, 6): {error}"
+        ) from None
     if rotations.ndim != 3 or rotations.shape[1:] != (NUM_JOINTS, 6) or len(rotations) == 0:
         raise ValueError(
             f"rotations must have shape (T, {NUM_JOINTS}, 6), T >= 1; got {rotations.shape}"
         )
-    if fps < 1:
-        raise ValueError(f"fps must be at least 1, got {fps}")
+    if not np.isfinite(rotations).all():
+        raise ValueError("rotations hold NaN or infinite values; a BVH file cannot show them")
+    if (
+        isinstance(fps, bool)
+        or not isinstance(fps, int | float | np.number)
+        or not (np.isfinite(fps) and fps >= 1)
+    ):
+        raise ValueError(f"fps must be a finite number of at least 1, got {fps!r}")
     world = global_rotations(rotations)
     columns = [np.zeros((len(rotations), 3))]  # the root's position: the origin
     for name, parent, _ in JOINTS:
@@ -123,6 +146,14 @@ def write_bvh(path: str | Path, rotations: np.ndarray, fps: int = FPS) -> Path:
     describe(JOINTS[0][0], None, 0)
     lines += ["MOTION", f"Frames: {len(motion)}", f"Frame Time: {1 / fps:.6f}"]
     lines += [" ".join(f"{v:.5f}" for v in frame) for frame in motion]
-    path = Path(path)
-    path.write_text("\n".join(lines) + "\n")
+    descriptor, temporary = tempfile.mkstemp(
+        prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
+    )
+    try:
+        with os.fdopen(descriptor, "w") as stream:
+            stream.write("\n".join(lines) + "\n")
+        os.replace(temporary, path)
+    except OSError as error:
+        Path(temporary).unlink(missing_ok=True)
+        raise OSError(error.errno, f"cannot write {path}: {error.strerror or error}") from error
     return path

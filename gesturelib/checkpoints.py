@@ -141,6 +141,22 @@ def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
         raise CheckpointError(f"{path} is damaged: it lacks {missing or 'a valid kind'}")
     if kind is not None and checkpoint["kind"] != kind:
         raise CheckpointError(f"{path} is a {checkpoint['kind']!r} checkpoint, expected {kind!r}")
+    if checkpoint["kind"] == "best":
+        problems = [
+            f"{key} ({what})"
+            for key, what, fits in (
+                ("history", "a dictionary", lambda v: isinstance(v, dict)),
+                ("score", "a number", lambda v: isinstance(v, int | float) and v == v),
+                ("epochs_done", "an integer", lambda v: isinstance(v, int)),
+                ("normaliser", "a dictionary or None", lambda v: v is None or isinstance(v, dict)),
+            )
+            if not fits(checkpoint.get(key))
+        ]
+        if problems:
+            raise CheckpointError(
+                f"{path} is damaged: these entries are missing or of the wrong type: "
+                f"{', '.join(problems)}. Retrain the model."
+            )
     return checkpoint
 
 
@@ -197,6 +213,16 @@ def load_model(path: str | Path, model_class: type[nn.Module], device: str = "cp
     return model.to(device).eval()
 
 
+def _lock_holder(lock: Path) -> int | None:
+    """The live process that holds ``lock``, or None (gone, or the file unreadable)."""
+    try:
+        holder = int(lock.read_text().strip())
+        os.kill(holder, 0)
+    except (OSError, ValueError):
+        return None
+    return holder if holder != os.getpid() else None
+
+
 class RunFolder:
     """``last.pt`` and ``best.pt`` of one training run, identified by its model, configs and data.
 
@@ -210,6 +236,35 @@ class RunFolder:
         self.folder = Path(folder)
         self.last, self.best = self.folder / "last.pt", self.folder / "best.pt"
         self.identity = identity
+
+    @contextlib.contextmanager
+    def writing(self):
+        """Hold the folder's lock (``.lock``, naming this process) while training writes it.
+
+        Raises:
+            CheckpointError: while another live process holds it.
+        """
+        if self.folder.exists() and not self.folder.is_dir():
+            raise CheckpointError(f"{self.folder} is a file, not a folder for checkpoints")
+        self.folder.mkdir(parents=True, exist_ok=True)
+        lock = self.folder / ".lock"
+        for _ in range(2):
+            try:
+                with open(lock, "x") as stream:
+                    stream.write(str(os.getpid()))
+                break
+            except FileExistsError:
+                holder = _lock_holder(lock)
+                if holder is not None:
+                    raise CheckpointError(
+                        f"another training run (process {holder}) is writing {self.folder}; "
+                        "wait for it to end, or choose another folder"
+                    ) from None
+                lock.unlink(missing_ok=True)  # left by a run that died: take it over
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)
 
     def claim(self, may_differ: Iterable[str], overwrite: bool) -> None:
         """Make sure the folder is this run's: delete its checkpoints if ``overwrite``, else check

@@ -27,33 +27,12 @@ import sys
 import time
 from pathlib import Path
 
+from gesturelib.outputs import OutputError, OutputFolder
 from gesturelib.runtime import OneLineParser
-
-#: Written into every folder a command fills, so that a second run may replace what the first
-#: made but never files a person put there.
-OUTPUT_MARKER = ".gesturelib-output"
 
 
 class CommandError(Exception):
     """A problem the user can fix; reported as one line, without a traceback."""
-
-
-def _output_folder(out: Path, overwrite: bool, command: str) -> None:
-    """Make ``out`` ready for ``command``'s files; refuse one holding files it did not write."""
-    if out.exists() and not out.is_dir():
-        raise CommandError(f"{out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / OUTPUT_MARKER).exists() and not overwrite:
-        raise CommandError(
-            f"{out} already holds files that `{command}` did not make; choose another --out "
-            "or pass --overwrite to write into it anyway"
-        )
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / OUTPUT_MARKER).write_text(
-            f"This folder was written by `python -m gesturelib {command}`.\n"
-        )
-    except OSError as error:
-        raise CommandError(f"cannot write into {out}: {error.strerror or error}") from error
 
 
 # ---------------------------------------------------------------------------------------------
@@ -151,9 +130,16 @@ def run_generate(args) -> list[Path]:
             args.audio if partner is None else f"{args.audio} with {args.partner}",
         )
     else:
-        conversation = load_conversation(args.conversation)  # its motion is never read
+        stem = Path(args.conversation)
+        if stem.suffix in (".wav", ".npz", ".json") and not Path(f"{stem}.wav").exists():
+            raise CommandError(
+                f"--conversation takes a path stem, without {stem.suffix}: "
+                f"--conversation {stem.with_suffix('')}"
+            )
+        conversation = load_conversation(stem)  # its motion is never read
         audio, sample_rate, partner = conversation.audio, conversation.sample_rate, None
         activity, heard = conversation.activity, args.conversation
+    folder = OutputFolder(args.out, "generate", args.overwrite)  # refused now, not after the work
     try:
         motion = speech_to_motion(
             model,
@@ -166,41 +152,43 @@ def run_generate(args) -> list[Path]:
             samples=args.samples,
             temperature=args.temperature,
             seed=args.seed,
+            progress=len(audio) > 60 * sample_rate,  # a bar for recordings over a minute
         )
     except AudioError as error:
         raise CommandError(f"{heard}: {error}") from error
-    out = Path(args.out)
-    _output_folder(out, args.overwrite, "generate")
-    written = []
-    for number, (rotations, positions) in enumerate(
-        zip(motion.rotations, motion.positions, strict=True), start=1
-    ):
-        folder = out if args.samples == 1 else out / f"sample-{number}"
-        folder.mkdir(exist_ok=True)
-        written += _write_motion(folder, rotations, positions, motion.activity)
-        if not args.no_video:
-            written.append(
-                _render([positions], ["the agent"], motion.audio, motion.sample_rate, folder)
-            )
-    return written
+    with folder.staging() as stage:
+        for number, (rotations, positions) in enumerate(
+            zip(motion.rotations, motion.positions, strict=True), start=1
+        ):
+            within = "" if args.samples == 1 else f"sample-{number}/"
+            _write_motion(stage, within, rotations, positions, motion.activity)
+            if not args.no_video:
+                _render(
+                    [positions],
+                    ["the agent"],
+                    motion.audio,
+                    motion.sample_rate,
+                    stage.path(f"{within}agent.mp4"),
+                )
+    return stage.files
 
 
-def _write_motion(folder: Path, rotations, positions, activity) -> list[Path]:
-    """``motion.npz`` and ``agent.bvh`` in ``folder``: limb rotations ``(T, 9, 6)``, their
-    keypoints ``(T, 9, 3)`` and who is talking ``(T,)``."""
+def _write_motion(stage, within: str, rotations, positions, activity) -> None:
+    """``motion.npz`` and ``agent.bvh`` (in the subfolder ``within`` of a staging folder): limb
+    rotations ``(T, 9, 6)``, their keypoints ``(T, 9, 3)`` and who is talking ``(T,)``."""
     import numpy as np
 
     from gesturelib.bvh import write_bvh
     from gesturelib.conventions import FPS
 
     np.savez(
-        folder / "motion.npz",
+        stage.path(f"{within}motion.npz"),
         rotations=rotations.astype(np.float32),
         positions=positions.astype(np.float32),
         activity=np.asarray(activity, dtype=np.int64),
         fps=np.int64(FPS),
     )
-    return [folder / "motion.npz", write_bvh(folder / "agent.bvh", rotations)]
+    write_bvh(stage.path(f"{within}agent.bvh"), rotations)
 
 
 def _parse_style(pairs: list[str]) -> dict[str, float]:
@@ -216,10 +204,8 @@ def _parse_style(pairs: list[str]) -> dict[str, float]:
     return parsed
 
 
-def _render(
-    motions, titles, audio, sample_rate: int, folder: Path, views=("front", "side")
-) -> Path:
-    """``folder/agent.mp4``: the motions ``[(T, 9, 3), ...]`` side by side, each in ``views``,
+def _render(motions, titles, audio, sample_rate: int, path: Path, views=("front", "side")) -> None:
+    """An MP4 at ``path``: the motions ``[(T, 9, 3), ...]`` side by side, each in ``views``,
     with the sound."""
     import matplotlib
 
@@ -227,22 +213,19 @@ def _render(
     from gesturelib import viz
 
     animation = viz.animate(motions, titles=titles, views=views)
-    return viz.save_animation(
-        animation, folder / "agent.mp4", audio=audio, sample_rate=sample_rate, overwrite=True
-    )
+    viz.save_animation(animation, path, audio=audio, sample_rate=sample_rate)
 
 
 def run_info(args) -> str:
     """A description of a run folder."""
     from gesturelib.history import History
-    from gesturelib.pretrained import load_run
+    from gesturelib.pretrained import load_run, read_summary
 
     model, _, checkpoint = load_run(args.run)
     history = History.from_dict(checkpoint["history"])
     parameters = sum(p.numel() for p in model.parameters())
     size = sum(p.stat().st_size for p in Path(args.run).rglob("*") if p.is_file())
-    summary_path = Path(args.run) / "run.json"
-    summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    summary = read_summary(args.run)
     lines = [
         f"run folder      {args.run}",
         f"model           {checkpoint['model_class']} ({parameters:,} parameters)",
@@ -279,8 +262,9 @@ def run_evaluate(args) -> list[Path]:
     splits = load_dataset(_evaluation_data(args, quick, groups))
     if not (splits["test"] and splits["val"]):
         raise CommandError("evaluation needs conversations in both the test and the val split")
-    out = Path(args.out)
-    _output_folder(out, args.overwrite, "evaluate")
+    folder = OutputFolder(args.out, "evaluate", args.overwrite)
+    if Path(args.cache).exists() and not Path(args.cache).is_dir():
+        raise CommandError(f"--cache {args.cache} is a file; give a folder for trained networks")
     torch.set_num_threads(args.threads)
 
     print(f"The FGD's motion-feature network for this data (trained once, cached in {args.cache}/)")
@@ -293,7 +277,9 @@ def run_evaluate(args) -> list[Path]:
     models = {name: [(m, n) for m, n, *_ in runs] for name, runs in groups.items()}
     rows, draws = evaluate_models(models, splits, args.samples, features)
     histories = {name: [(m, h) for m, _, h, _ in runs] for name, runs in groups.items()}
-    return report.write_evaluation(rows, draws, histories, splits, out)
+    with folder.staging() as stage:
+        report.write_evaluation(rows, draws, histories, splits, stage.root)
+    return stage.files
 
 
 def _run_groups(folders: list[Path]) -> dict[str, list]:
@@ -301,6 +287,7 @@ def _run_groups(folders: list[Path]) -> dict[str, list]:
     differ only in their seed share a row. Row name -> ``[(model, normaliser, history, folder),
     ...]``,
     each with its run folder last."""
+    from gesturelib.checkpoints import state_fingerprint
     from gesturelib.evaluation.table import REFERENCES
     from gesturelib.history import History
     from gesturelib.pretrained import load_run
@@ -311,8 +298,16 @@ def _run_groups(folders: list[Path]) -> dict[str, list]:
     if repeated:
         raise CommandError(f"a run folder is given twice: {', '.join(sorted(repeated))}")
     groups: dict[str, list] = {}
+    seen: dict[str, Path] = {}  # the weights' fingerprint -> the folder that holds them
     for folder in folders:
         model, normaliser, checkpoint = load_run(folder)
+        weights = state_fingerprint(model)
+        if weights in seen:
+            raise CommandError(
+                f"{seen[weights]} and {folder} hold the same trained model (copies of one run); "
+                "give each run once: copies are no seeds"
+            )
+        seen[weights] = Path(folder)
         if not hasattr(model, "step"):
             raise CommandError(
                 f"{folder} holds a {type(model).__name__}, which does not generate motion"
@@ -355,11 +350,11 @@ def _evaluation_data(args, quick: bool, groups: dict) -> Path:
 
     if args.data is not None:
         return Path(args.data)
+    from gesturelib.pretrained import read_summary
+
     trained_on = set()
     for *_, folder in (run for runs in groups.values() for run in runs):
-        summary = folder / "run.json"
-        if summary.exists():
-            trained_on.add(json.loads(summary.read_text()).get("data"))
+        trained_on.add(read_summary(folder).get("data"))
     trained_on.discard(None)
     if len(trained_on) > 1:
         raise CommandError(
@@ -397,48 +392,48 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
     if seconds <= 0:
         raise CommandError(f"--seconds must be positive, got {seconds}")
     model, normaliser, _ = load_run(pretrained_folder("moglow"))
-    _output_folder(out, overwrite, "demo")
+    folder = OutputFolder(out, "demo", overwrite)
     print(
         f"Generating a {seconds:g} s conversation (seed {seed}; --seed {seed} draws it again) ..."
     )
     conversation = generate_conversation(seconds, seed=seed)
-    written = save_conversation(conversation, out / "conversation", overwrite=True)
-
-    print("The shipped MoGlow moves the agent to the conversation's speech ...")
-    motion = speech_to_motion(
-        model,
-        normaliser,
-        conversation.audio,
-        conversation.sample_rate,
-        activity=conversation.activity,
-        seed=seed,
-    )
-    positions = motion.positions[0]
-    written += _write_motion(out, motion.rotations[0], positions, conversation.activity)
-    print("Rendering the recorded motion and MoGlow's side by side, with the speech ...")
-    motions = [conversation.positions, positions]
-    titles = ["recorded (the generator's rules)", "MoGlow (shipped model)"]
-    # From the front only: two motions in both views would take twice as long to render.
-    audio, rate = conversation.audio, conversation.sample_rate
-    written.append(_render(motions, titles, audio, rate, out, views=("front",)))
-    mel = mel_spectrogram(conversation.audio, conversation.sample_rate, fps=conversation.fps)
-    figure = viz.plot_timeline(
-        mel,
-        conversation.activity,
-        fps=conversation.fps,
-        title="Speech (log-mel) and who is talking",
-    )
-    written.append(out / "timeline.png")
-    figure.savefig(written[-1], dpi=120)
-    plt.close(figure)
-    # One pose a second, overlaid, as in the Flow-VAE paper's figures.
-    figure = viz.plot_pose(
-        conversation.positions[:: int(conversation.fps)], title="The agent's poses, one a second"
-    )
-    written.append(out / "poses.png")
-    figure.savefig(written[-1], dpi=120)
-    plt.close(figure)
-    return [Path(p) for p in written]
+    with folder.staging() as stage:
+        stem = stage.path("conversation")
+        save_conversation(conversation, stem)
+        print("The shipped MoGlow moves the agent to the conversation's speech ...")
+        motion = speech_to_motion(
+            model,
+            normaliser,
+            conversation.audio,
+            conversation.sample_rate,
+            activity=conversation.activity,
+            seed=seed,
+        )
+        positions = motion.positions[0]
+        _write_motion(stage, "", motion.rotations[0], positions, conversation.activity)
+        print("Rendering the recorded motion and MoGlow's side by side, with the speech ...")
+        motions = [conversation.positions, positions]
+        titles = ["recorded (the generator's rules)", "MoGlow (shipped model)"]
+        # From the front only: two motions in both views would take twice as long to render.
+        audio, rate = conversation.audio, conversation.sample_rate
+        _render(motions, titles, audio, rate, stage.path("agent.mp4"), views=("front",))
+        mel = mel_spectrogram(conversation.audio, conversation.sample_rate, fps=conversation.fps)
+        figure = viz.plot_timeline(
+            mel,
+            conversation.activity,
+            fps=conversation.fps,
+            title="Speech (log-mel) and who is talking",
+        )
+        figure.savefig(stage.path("timeline.png"), dpi=120)
+        plt.close(figure)
+        # One pose a second, overlaid, as in the Flow-VAE paper's figures.
+        figure = viz.plot_pose(
+            conversation.positions[:: int(conversation.fps)],
+            title="The agent's poses, one a second",
+        )
+        figure.savefig(stage.path("poses.png"), dpi=120)
+        plt.close(figure)
+    return stage.files
 
 
 # ---------------------------------------------------------------------------------------------
@@ -571,7 +566,15 @@ def main(argv: list[str] | None = None) -> int:
             for path in files:
                 print(f"  {path.name}")
             print("Open agent.mp4 to watch and hear the agent.")
-    except (CommandError, CheckpointError, OSError, ValueError) as error:
+    except KeyboardInterrupt:
+        advice = (
+            f"; the run in {args.out} continues with the same command and --resume"
+            if args.command == "train" and (Path(args.out) / "last.pt").exists()
+            else ""
+        )
+        print(f"gesturelib {args.command}: interrupted{advice}", file=sys.stderr)
+        return 130
+    except (CommandError, CheckpointError, OutputError, OSError, ValueError) as error:
         # One line: the message's first line, and its first detail if it lists some.
         lines = [line.strip() for line in str(error).strip().splitlines()] or [type(error).__name__]
         message = lines[0] + (f" {lines[1]}" if lines[0].endswith(":") and len(lines) > 1 else "")

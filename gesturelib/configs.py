@@ -81,17 +81,24 @@ def check_fields(
             fail(name, "True or False")
 
 
+#: The highest sampling temperature: beyond it every draw lies over three standard deviations
+#: out, and motion turns to noise.
+MAX_TEMPERATURE = 3.0
+
+
 def check_temperature(temperature) -> float:
-    """A sampling temperature as a float: a finite number >= 0 (0 gives the base's mode).
+    """A sampling temperature as a float: a number in ``[0, MAX_TEMPERATURE]`` (0 gives the
+    base's mode, 1 the model's own spread).
 
     Raises:
-        TypeError: if it is not a number; ValueError: if it is negative or not finite.
+        TypeError: if it is not a number; ValueError: if it lies outside that range.
     """
     if isinstance(temperature, bool) or not isinstance(temperature, numbers.Real):
         raise TypeError(f"temperature must be a number, got {type(temperature).__name__}")
-    if not (math.isfinite(temperature) and temperature >= 0):
+    if not (math.isfinite(temperature) and 0 <= temperature <= MAX_TEMPERATURE):
         raise ValueError(
-            f"temperature must be a finite number >= 0 (0 gives the mode), got {temperature}"
+            f"temperature must lie in [0, {MAX_TEMPERATURE:g}] (0: the mode; 1: the model's own "
+            f"spread; beyond {MAX_TEMPERATURE:g} motion turns to noise), got {temperature:g}"
         )
     return float(temperature)
 

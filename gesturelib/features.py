@@ -106,6 +106,8 @@ def load_audio(
             (its header promises more samples than it holds), has no samples, or contains NaN
             or infinite values. The message names the file.
     """
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(f"path must be a file path (a str or Path), got {type(path).__name__}")
     path = Path(path)
     if sample_rate is not None:
         sample_rate = _positive_int(sample_rate, "sample_rate")
@@ -123,35 +125,99 @@ def load_audio(
             "download or recording): copy or write it again"
         )
     try:
-        data, file_rate = soundfile.read(path, dtype="float32", always_2d=True)
+        info = soundfile.info(path)
     except (soundfile.LibsndfileError, RuntimeError) as error:
         raise AudioError(
             f"{path} could not be read as audio ({error}); expected a WAV, FLAC or OGG file"
         ) from error
-
-    if data.size == 0:
-        raise AudioError(f"{path} contains no samples (a header without audio data)")
-    audio = data.mean(axis=1, dtype=np.float32)  # (n, channels) -> (n,)
-    not_finite = ~np.isfinite(audio)
-    if not_finite.all():
-        raise AudioError(f"{path}: every sample is NaN or infinite; the signal is unusable")
-    if not_finite.any():
+    file_rate = int(info.samplerate)
+    if not MIN_FILE_RATE <= file_rate <= MAX_FILE_RATE:
         raise AudioError(
-            f"{path}: {int(not_finite.sum())} of {audio.size} samples are NaN or infinite"
+            f"{path} claims a sample rate of {file_rate} Hz, which no recording has (expected "
+            f"{MIN_FILE_RATE} to {MAX_FILE_RATE} Hz): its header is wrong; convert it again"
         )
-
-    peak = float(np.abs(audio).max())
+    if info.frames == 0:
+        raise AudioError(f"{path} contains no samples (a header without audio data)")
+    target = file_rate if sample_rate is None else sample_rate
+    audio, peak = _read_mono(path, file_rate, target, info.frames)
     if peak > 1.0:
         warnings.warn(
             f"{path}: float samples reach {peak:.3g}, beyond [-1, 1]; scaled down to peak 1",
             stacklevel=2,
         )
-        audio = audio / np.float32(peak)
-    if sample_rate is not None and sample_rate != file_rate:
-        audio = librosa.resample(audio, orig_sr=file_rate, target_sr=sample_rate)
-        audio = np.clip(audio, -1.0, 1.0).astype(np.float32, copy=False)
-        file_rate = sample_rate
-    return audio, int(file_rate)
+        audio /= np.float32(peak)
+    if target != file_rate:  # resampling can overshoot by a hair
+        np.clip(audio, -1.0, 1.0, out=audio)
+    return audio, target
+
+
+#: The sample rates a recording can have; a header claiming another is damaged.
+MIN_FILE_RATE, MAX_FILE_RATE = 4000, 384_000
+#: Seconds of a file read at once: a long recording is streamed, so that memory stays bounded
+#: (an hour at 16 kHz is 230 MB of float32, whatever the file's rate and channels).
+_BLOCK_S = 10
+
+
+def _read_mono(path: Path, file_rate: int, target: int, frames: int) -> tuple[np.ndarray, float]:
+    """The file's samples down-mixed (the mean of its channels) and resampled to ``target``
+    block by block (soxr's high quality, as ``librosa.resample``): ``(audio (n,), peak before
+    any scaling)``.
+
+    Raises:
+        AudioError: naming the file, for NaN or infinite samples or an unreadable block.
+    """
+    import soxr
+
+    length = frames if target == file_rate else -(-frames * target // file_rate)
+    audio = np.zeros(length, np.float32)
+    stream = (
+        None
+        if target == file_rate
+        else soxr.ResampleStream(file_rate, target, 1, dtype="float32", quality="HQ")
+    )
+    filled, not_finite, peak, mixed_energy, channel_energy = 0, 0, 0.0, 0.0, 0.0
+    try:
+        blocks = soundfile.blocks(
+            path, blocksize=int(_BLOCK_S * file_rate), dtype="float32", always_2d=True
+        )
+        for last, block in _with_last(blocks):
+            mono = block.mean(axis=1, dtype=np.float32)
+            finite = np.isfinite(mono)
+            not_finite += int((~finite).sum())
+            if not finite.all():
+                continue
+            peak = max(peak, float(np.abs(mono).max(initial=0.0)))
+            mixed_energy += float(np.square(mono, dtype=np.float64).sum())
+            channel_energy += float(np.square(block, dtype=np.float64).mean(axis=1).sum())
+            if stream is not None:
+                mono = stream.resample_chunk(mono, last=last)
+            taken = min(len(mono), length - filled)
+            audio[filled : filled + taken] = mono[:taken]
+            filled += taken
+    except (soundfile.LibsndfileError, RuntimeError) as error:
+        raise AudioError(f"{path} could not be read to its end ({error}); copy it again") from error
+    if not_finite:
+        raise AudioError(
+            f"{path}: {'every sample is' if not_finite == frames else f'{not_finite} of {frames} samples are'} "
+            "NaN or infinite; the signal is unusable"
+        )
+    if mixed_energy < 1e-6 * channel_energy:
+        raise AudioError(
+            f"{path}: its channels cancel out when mixed to one (one is the other inverted); "
+            "keep one channel, e.g. with sox or Audacity, and try again"
+        )
+    return audio, peak
+
+
+def _with_last(items):
+    """``(is_last, item)`` for each item of an iterable."""
+    iterator = iter(items)
+    previous = next(iterator, None)
+    for item in iterator:
+        yield False, previous
+        previous = item
+    if previous is not None:
+        yield True, previous
 
 
 def _wav_data_bytes(path: Path) -> tuple[int, int]:
@@ -455,7 +521,12 @@ def voice_activity(
     """
     audio, sample_rate, fps, n_frames = _check_features_input(audio, sample_rate, fps)
     boundaries = _frame_boundaries(n_frames, sample_rate, fps)
-    squares = np.square(audio[: boundaries[-1]], dtype=np.float64)
+    # Without its DC offset: a constant is no sound (digital silence stays exact zeros).
+    samples = audio[: boundaries[-1]].astype(np.float64)
+    nonzero = samples != 0
+    if nonzero.any():
+        samples[nonzero] -= samples[nonzero].mean()
+    squares = np.square(samples)
     energy_db = 10 * np.log10(
         np.add.reduceat(squares, boundaries[:-1]) / np.diff(boundaries) + ENERGY_FLOOR
     )
@@ -481,7 +552,15 @@ def who_is_talking(
             whole frames than the agent's, or when neither recording holds speech (the agent
             would only rest).
     """
-    speaking = voice_activity(agent, sample_rate, fps)
+    shortest = 0.1  # voice_activity's blip_s: shorter sound is not counted as speech
+    for name, recording in (("the recording", agent), ("the partner's recording", partner)):
+        if recording is not None and 0 < len(recording) < shortest * sample_rate:
+            raise AudioError(
+                f"{name} lasts {1000 * len(recording) / sample_rate:.0f} ms, too short to hear "
+                f"speech in (at least {1000 * shortest:.0f} ms); give a longer recording"
+            )
+    speaking = voice_activity(agent, sample_rate, fps, blip_s=shortest)
+    _check_speech_like(agent, sample_rate, speaking, fps, "the recording")
     listening = np.zeros_like(speaking)
     if partner is not None:
         if num_frames(len(partner), sample_rate, fps) != len(speaking):
@@ -490,7 +569,8 @@ def who_is_talking(
                 f"agent's {len(agent) / sample_rate:.3f} s; it must have the agent's length (to "
                 f"within a frame, {1000 // fps} ms)"
             )
-        listening = voice_activity(partner, sample_rate, fps)
+        listening = voice_activity(partner, sample_rate, fps, blip_s=shortest)
+        _check_speech_like(partner, sample_rate, listening, fps, "the partner's recording")
     if not (speaking.any() or listening.any()):
         heard = (
             "the recording holds no speech" if partner is None else "neither recording holds speech"
@@ -504,6 +584,30 @@ def who_is_talking(
         [Activity.BOTH, Activity.A_SPEAKS, Activity.B_SPEAKS],
         Activity.NONE,
     ).astype(np.int64)
+
+
+#: Below both, a recording's voiced frames are a steady sound, not speech: the spread of their
+#: loudness (nats of log-mel power; speech 1.2 and more, a tone, hum or noise 0.1 and less) and
+#: the median change of their spectrum from frame to frame (speech 1.2 and more, steady 0.45
+#: and less; measured on the course's data, the committed recordings and steady signals).
+STEADY_LOUDNESS_SPREAD, STEADY_SPECTRAL_CHANGE = 0.5, 0.8
+
+
+def _check_speech_like(audio, sample_rate: int, voiced: np.ndarray, fps: int, name: str) -> None:
+    """Refuse a recording whose voice activity is a steady sound: a tone, a hum, a DC offset or
+    steady noise reads as voice by its energy alone, and would make the agent speak throughout."""
+    if voiced.sum() < 5:  # too little to tell
+        return
+    log_mel = mel_spectrogram(audio, sample_rate, fps=fps)
+    spread = float(np.std(log_mel.mean(axis=1)[voiced]))
+    change = np.abs(np.diff(log_mel, axis=0)).mean(axis=1)[voiced[1:] & voiced[:-1]]
+    if spread < STEADY_LOUDNESS_SPREAD and (
+        change.size == 0 or float(np.median(change)) < STEADY_SPECTRAL_CHANGE
+    ):
+        raise AudioError(
+            f"{name} holds a steady sound (a tone, hum or noise: its loudness and spectrum barely "
+            "change), not speech; give a recording of a voice"
+        )
 
 
 def _short_runs(mask: np.ndarray, shortest: int, keep_ends: bool) -> np.ndarray:

@@ -161,6 +161,7 @@ def speech_to_motion(
     samples: int = 1,
     temperature: float | None = None,
     seed: int | None = 0,
+    progress: bool = False,
 ) -> Motion:
     """The agent's motion for a recording of its speech.
 
@@ -175,18 +176,13 @@ def speech_to_motion(
             (:func:`~gesturelib.features.who_is_talking`).
         style: percentiles of the training values by style feature, e.g.
             ``{"hand_height": 85}`` (the others at their median), for a model with style inputs.
-        samples, temperature, seed: as for :func:`gesturelib.sampling.generate`.
+        samples, temperature, seed, progress: as for :func:`gesturelib.sampling.generate`.
     Returns:
         The :class:`Motion`.
     Raises:
         ValueError: ``style`` for a model trained without style inputs, or bad percentiles.
         AudioError: a recording that cannot be heard (see ``who_is_talking``).
     """
-    has_style = getattr(model.config, "style", False)
-    if style and not has_style:
-        raise ValueError(
-            f"this {type(model).__name__} was trained without style inputs; pass style=None"
-        )
     style_values = normaliser.style_at_percentiles(dict(style)) if style else None
     if activity is None:
         activity = who_is_talking(audio, sample_rate, partner)
@@ -201,6 +197,7 @@ def speech_to_motion(
         temperature=temperature,
         seed=seed,
         style=style_values,
+        progress=progress,
     )
     return Motion(rotations, forward_kinematics(rotations), activity, audio, sample_rate)
 

@@ -40,6 +40,7 @@ def load_run(folder: str | Path, device: str = "cpu"):
         ValueError: for an unknown ``device``.
     """
     from gesturelib.data import Normaliser
+    from gesturelib.history import History
     from gesturelib.recipes import MODEL_CLASSES
     from gesturelib.runtime import device as checked_device
 
@@ -59,8 +60,52 @@ def load_run(folder: str | Path, device: str = "cpu"):
         )
     if checkpoint["normaliser"] is None:
         raise CheckpointError(f"{path} has no normalisation statistics; retrain it with `train`")
+    try:
+        normaliser = Normaliser.from_dict(checkpoint["normaliser"])
+        History.from_dict(checkpoint["history"])
+    except (TypeError, ValueError) as error:
+        raise CheckpointError(f"{path} is damaged ({error}); retrain the model") from error
     model = load_model(path, MODEL_CLASSES[name], device)
-    return model, Normaliser.from_dict(checkpoint["normaliser"]), checkpoint
+    damaged = [n for n, p in model.state_dict().items() if not p.isfinite().all()]
+    if damaged:
+        raise CheckpointError(
+            f"{path} holds NaN or infinite weights ({damaged[0]}"
+            + (f" and {len(damaged) - 1} more" if len(damaged) > 1 else "")
+            + "): the run diverged or the file is damaged; retrain the model"
+        )
+    return model, normaliser, checkpoint
+
+
+def read_summary(folder: str | Path) -> dict:
+    """The ``run.json`` of a run folder (what ``train`` wrote: the data, seed, ...), or ``{}``
+    where there is none (the notebooks' cached runs).
+
+    Raises:
+        CheckpointError: naming the file, if it is not a JSON object with the expected types.
+    """
+    import json
+
+    path = Path(folder) / "run.json"
+    if not path.exists():
+        return {}
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise CheckpointError(
+            f"{path} is not valid JSON ({error}); delete it or retrain"
+        ) from error
+    types = {"data": str, "model": str, "seed": int, "quick": bool}
+    wrong = [
+        key
+        for key, kind in types.items()
+        if isinstance(summary, dict) and key in summary and not isinstance(summary[key], kind)
+    ]
+    if not isinstance(summary, dict) or wrong:
+        raise CheckpointError(
+            f"{path} is damaged ({'not a JSON object' if not wrong else 'wrong type: ' + ', '.join(wrong)});"
+            " delete it or retrain"
+        )
+    return summary
 
 
 def pretrained_folder(name: str) -> Path:

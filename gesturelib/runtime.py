@@ -76,6 +76,8 @@ def device(name: str | torch.device) -> torch.device:
         found = torch.device(name)
     except (RuntimeError, TypeError) as error:
         raise ValueError(f"{name!r} is not a device; use e.g. 'cpu' or 'cuda'") from error
+    if found.type not in ("cpu", "cuda", "mps"):
+        raise ValueError(f"device {name!r} cannot run the models; use 'cpu' or 'cuda'")
     if found.type == "cuda" and not torch.cuda.is_available():
         raise ValueError(f"device {name!r} asked for, but no CUDA GPU is available here")
     return found
@@ -92,4 +94,6 @@ class OneLineParser(argparse.ArgumentParser):
     like every other error a user can fix; ``--help`` shows the usage."""
 
     def error(self, message: str):
+        if message.endswith("expected one argument"):  # e.g. --audio -take1.wav
+            message += " (a file name that starts with '-' needs ./ before it)"
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")

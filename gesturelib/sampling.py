@@ -34,11 +34,12 @@ import numpy as np
 import torch
 
 from gesturelib.configs import check_temperature
-from gesturelib.conventions import Activity
+from gesturelib.conventions import FPS, Activity
 from gesturelib.features import activity_one_hot
 from gesturelib.pose_surface import project
 from gesturelib.runtime import device_of, standard_normal
 from gesturelib.skeleton import NUM_JOINTS, POSE_DIM
+from gesturelib.style import STYLE_FEATURES
 
 #: Silence as :func:`~gesturelib.features.speech_features` gives it (the noise floor): what the
 #: speech window holds beyond either end of a recording.
@@ -61,6 +62,15 @@ class Stream:
     """
 
     def __init__(self, model, normaliser, *, samples=1, temperature=None, seed=None, style=None):
+        if not callable(getattr(model, "step", None)) or not hasattr(model, "config"):
+            raise TypeError(
+                f"model must generate motion (a model with step() and a config), got "
+                f"{type(model).__name__}"
+            )
+        if not hasattr(normaliser, "normalise_speech"):
+            raise TypeError(
+                f"normaliser must be the model's Normaliser, got {type(normaliser).__name__}"
+            )
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
             raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
         self.model, self.normaliser, self.samples = model, normaliser, samples
@@ -86,8 +96,14 @@ class Stream:
         self.next_frame = 0  # the frame whose pose comes next
         self.received = 0
         self.style = None
+        self.finished = False
+        if style is not None and not getattr(config, "style", False):
+            raise ValueError(
+                f"this {type(model).__name__} was trained without style inputs; pass style=None"
+            )
         if getattr(config, "style", False):
-            raw = normaliser.style_at_percentiles({}) if style is None else np.asarray(style)
+            raw = normaliser.style_at_percentiles({}) if style is None else _checked_style(style)
+            _check_style_range(raw, normaliser)
             self.style = tensor(normaliser.normalise_style(raw)).expand(samples, 1, -1)
 
     def push(self, speech: np.ndarray, activity: np.ndarray) -> np.ndarray:
@@ -103,10 +119,17 @@ class Stream:
             ``(samples, m, 9, 6)`` limb rotations of the ``m`` frames that are now complete: those
             whose ``speech_future`` frames of look-ahead have arrived.
         """
-        speech, activity = np.asarray(speech, np.float32), np.asarray(activity)
+        if self.finished:
+            raise RuntimeError("this Stream has finished; start a new Stream for more speech")
+        try:
+            speech = np.asarray(speech, np.float32)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"speech must be numbers, (n, n_mels) frames: {error}") from None
+        activity = np.asarray(activity)
         n_mels = len(self.normaliser.speech_mean)
         if speech.ndim != 2 or speech.shape[1] != n_mels:
             raise ValueError(f"speech must be (n, {n_mels}) frames, got {speech.shape}")
+        _check_speech(speech)
         if activity.shape != (len(speech),):
             raise ValueError(f"activity must be ({len(speech)},) codes, got {activity.shape}")
         normalised = self.normaliser.normalise_speech(speech)
@@ -121,6 +144,9 @@ class Stream:
     def finish(self) -> np.ndarray:
         """The poses of the last frames, their look-ahead padded with silence:
         ``(samples, m, 9, 6)``."""
+        if self.finished:
+            raise RuntimeError("this Stream has finished already; start a new Stream")
+        self.finished = True
         future = self.speech_future
         self._append(self.silence.expand(future, -1), self.none.expand(future, -1))
         return self._generate(self.received)
@@ -147,6 +173,11 @@ class Stream:
                 if self.style is not None:
                     frame["style"] = self.style
                 pose, self.state = self.model.step(frame, self.state, self._noise())
+                if not torch.isfinite(pose).all():
+                    raise ValueError(
+                        f"the model's pose for frame {self.next_frame} is NaN or infinite: its "
+                        "weights are damaged or it diverged; retrain it"
+                    )
                 pose = self._on_surface(pose)
                 if self.past_poses:
                     self.past = torch.cat([self.past[:, 1:], pose[:, None]], dim=1)
@@ -179,7 +210,7 @@ class Stream:
         return (project(raw).flatten(-2) - self.pose_mean) / self.pose_std
 
 
-def generate(model, normaliser, speech, activity, **options) -> np.ndarray:
+def generate(model, normaliser, speech, activity, progress: bool = False, **options) -> np.ndarray:
     """Motion for a whole recording: limb rotations ``(samples, T, 9, 6)``.
 
     Args:
@@ -188,11 +219,80 @@ def generate(model, normaliser, speech, activity, **options) -> np.ndarray:
             (any ``T >= 1``).
         activity: ``(T,)`` who-is-talking codes; pass other codes than the recording's to make the
             agent speak or listen where it did not.
+        progress: show a progress bar (the speech is then pushed a minute at a time; the motion
+            is the same).
         options: ``samples``, ``temperature``, ``seed``, ``style`` of :class:`Stream`.
     """
+    from tqdm.auto import tqdm
+
     stream = Stream(model, normaliser, **options)
-    first = stream.push(speech, activity)
-    return np.concatenate([first, stream.finish()], axis=1)
+    step = _PROGRESS_STEP if progress else max(len(speech), 1)
+    parts = []
+    with tqdm(total=len(speech), unit="frame", desc="generating", disable=not progress) as bar:
+        for start in range(0, len(speech), step):
+            parts.append(stream.push(speech[start : start + step], activity[start : start + step]))
+            bar.update(len(speech[start : start + step]))
+    return np.concatenate([*parts, stream.finish()], axis=1)
+
+
+#: Frames pushed at once when generation shows its progress: a minute of speech.
+_PROGRESS_STEP = 60 * FPS
+
+
+#: Speech features lie within about -2 and 5 (0: the recording's noise floor, 1: its speech
+#: level); far beyond these bounds the input is something else.
+SPEECH_RANGE = (-20.0, 50.0)
+
+
+def _check_speech(speech: np.ndarray) -> None:
+    """Refuse what cannot be speech features: non-finite values, values far out of their range,
+    or a raw log-mel spectrogram (whose silence lies far below zero)."""
+    bad = np.flatnonzero(~np.isfinite(speech).all(axis=1))
+    if bad.size:
+        raise ValueError(
+            f"speech holds NaN or infinite values in {bad.size} frames (first: frame {bad[0]})"
+        )
+    low, high = SPEECH_RANGE
+    if speech.size and (speech.min() < low or speech.max() > high):
+        raise ValueError(
+            f"speech lies in [{speech.min():.3g}, {speech.max():.3g}], far outside the range of "
+            f"speech features ({low:g} to {high:g}; about -2 to 5 in practice): pass "
+            "gesturelib.features.speech_features(audio, sample_rate)"
+        )
+    if len(speech) >= 25 and np.median(speech) < -3:
+        raise ValueError(
+            f"speech has a median of {np.median(speech):.1f}: this looks like a raw log-mel "
+            "spectrogram, not speech features (whose silence reads 0); pass "
+            "gesturelib.features.speech_features(audio, sample_rate)"
+        )
+
+
+def _checked_style(style) -> np.ndarray:
+    try:
+        raw = np.asarray(style, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"style must be numbers: {error}") from None
+    if raw.shape != (len(STYLE_FEATURES),) or not np.isfinite(raw).all():
+        raise ValueError(
+            f"style must be {len(STYLE_FEATURES)} finite numbers ({', '.join(STYLE_FEATURES)}), "
+            f"got {style!r}"
+        )
+    return raw
+
+
+def _check_style_range(raw: np.ndarray, normaliser) -> None:
+    """Refuse a style far beyond what the training data held (more than its whole range past
+    either end): the model never saw such values, and its motion there means nothing."""
+    lowest, highest = normaliser.style_percentiles[0], normaliser.style_percentiles[-1]
+    span = highest - lowest
+    outside = (raw < lowest - span) | (raw > highest + span)
+    if outside.any():
+        index = int(np.flatnonzero(outside)[0])
+        raise ValueError(
+            f"style {STYLE_FEATURES[index]} = {raw[index]:g} lies far outside the training values "
+            f"({lowest[index]:.3g} to {highest[index]:.3g}); choose a percentile with "
+            "normaliser.style_at_percentiles"
+        )
 
 
 def _generators(seed, samples: int):

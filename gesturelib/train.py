@@ -192,12 +192,18 @@ def train(
             raise ValueError(f"{name} has {len(data)} items: too few for one batch")
     target = device(config.device)
     model.to(target)
-    was_training = model.training
-    folder = None
-    if checkpoint_dir is not None:
-        fingerprint = data_fingerprint or dataset_fingerprint(train_data, val_data)
-        folder = RunFolder(checkpoint_dir, _identity(model, config, fingerprint))
+    if checkpoint_dir is None:
+        return _fit(model, train_data, val_data, config, None, normaliser, progress, target)
+    fingerprint = data_fingerprint or dataset_fingerprint(train_data, val_data)
+    folder = RunFolder(checkpoint_dir, _identity(model, config, fingerprint))
+    with folder.writing():  # one training run at a time in a folder
         folder.claim(RESUMABLE_FIELDS, overwrite)
+        return _fit(model, train_data, val_data, config, folder, normaliser, progress, target)
+
+
+def _fit(model, train_data, val_data, config, folder, normaliser, progress, target) -> History:
+    """The loop of :func:`train`, its inputs checked and its folder (or None) claimed."""
+    was_training = model.training
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr_max)
     # A random stream of our own, seeded: training neither depends on nor disturbs the caller's.
     with torch.random.fork_rng(devices=[target.index or 0] if target.type == "cuda" else []):
@@ -241,7 +247,7 @@ def train(
             if folder is not None and not isinstance(error, NonFiniteLossError):
                 error.add_note(
                     f"{folder.last} (after epoch {run.saved_epoch}) is intact: call train() "
-                    "again with the same checkpoint_dir to resume."
+                    "again with the same checkpoint_dir (or `train` with --resume) to resume."
                 )
             raise
     if run.best_weights is not None:

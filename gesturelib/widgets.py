@@ -65,9 +65,21 @@ class Clip:
     activity: np.ndarray
     truth: np.ndarray | None = None
 
+    def __post_init__(self):
+        frames = len(np.asarray(self.activity))
+        if np.asarray(self.audio).ndim != 1 or not np.isfinite(self.audio).all():
+            raise ValueError("a clip's audio must be (n,) finite samples")
+        if self.truth is not None and np.shape(self.truth) != (frames, 9, 3):
+            raise ValueError(
+                f"a clip's truth must be (T, 9, 3) keypoints for its {frames} frames of "
+                f"activity, got {np.shape(self.truth)}"
+            )
+
     @classmethod
     def from_conversation(cls, conversation, start_s: float = 0.0, seconds: float = 10.0) -> Clip:
         """``seconds`` of a conversation from ``start_s`` on, with its recorded motion."""
+        if not (np.isfinite(start_s) and np.isfinite(seconds)):
+            raise ValueError(f"start_s and seconds must be finite, got {start_s} and {seconds}")
         first, frames = round(start_s * FPS), round(seconds * FPS)
         if not 0 <= first < conversation.num_frames or frames < 1:
             raise ValueError(
@@ -164,6 +176,8 @@ class PoseViewer(anywidget.AnyWidget):
 
 def wav_data_url(audio: np.ndarray, sample_rate: int) -> str:
     """``audio`` ``(n,)`` as a 16-bit WAV in a ``data:`` URL, which an ``<audio>`` element plays."""
+    if not np.isfinite(audio).all():
+        raise ValueError("audio holds NaN or infinite samples; a WAV cannot play them")
     buffer = io.BytesIO()
     soundfile.write(buffer, np.clip(audio, -1, 1), sample_rate, format="WAV", subtype="PCM_16")
     return "data:audio/wav;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
@@ -184,7 +198,13 @@ class Explorer:
     def __init__(self, models: Mapping[str, tuple], clips: Mapping[str, Clip]) -> None:
         if not models or not clips:
             raise ValueError("the explorer needs at least one model and one clip")
-        for name, (model, _) in models.items():
+        for name, pair in models.items():
+            if not (isinstance(pair, tuple) and len(pair) == 2):
+                raise TypeError(
+                    f"models[{name!r}] must be a (model, normaliser) pair, e.g. load_run(...)[:2]; "
+                    f"got {type(pair).__name__}"
+                )
+            model = pair[0]
             if not hasattr(model, "step"):
                 raise ValueError(
                     f"the model {name!r} is a {type(model).__name__}, which does not generate "

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from gesturelib.checkpoints import VERSION
-from gesturelib.cli import OUTPUT_MARKER, main
+from gesturelib.cli import main
 from gesturelib.features import load_audio
+from gesturelib.outputs import MARKER as OUTPUT_MARKER
 
 
 @pytest.fixture(scope="module")

@@ -215,3 +215,19 @@ def test_style_control_holds_the_asked_style_and_refuses_impossible_percentiles(
     assert not np.array_equal(a, b)  # the style reaches the model
     with pytest.raises(ValueError, match=r"in \[0, 100\]"):
         normaliser.style_at_percentiles({"hand_height": 101})
+
+
+def test_generation_with_a_progress_bar_draws_the_same_motion(
+    short_windows, trained_looking, monkeypatch
+):
+    import gesturelib.sampling as sampling
+
+    conversation, normaliser, batch, _ = short_windows
+    model = trained_looking(SMALL, normaliser, batch)
+    speech = speech_features(conversation.audio, conversation.sample_rate)
+    whole = generate(model, normaliser, speech, conversation.activity, samples=2, seed=4)
+    monkeypatch.setattr(sampling, "_PROGRESS_STEP", 7)  # many pushes of a few frames
+    pushed = generate(
+        model, normaliser, speech, conversation.activity, samples=2, seed=4, progress=True
+    )
+    np.testing.assert_array_equal(whole, pushed)

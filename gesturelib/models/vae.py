@@ -90,13 +90,12 @@ across models); ``kl`` (VAE and CVAE), nats per frame.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import torch
 from torch import nn
 
-from gesturelib.configs import SpeechContext, check_fields
+from gesturelib.configs import SpeechContext, check_fields, check_temperature
 from gesturelib.conventions import N_MELS, NUM_ACTIVITIES
 from gesturelib.models.common import batch_parts, eval_mode, first_parameter, mlp
 from gesturelib.skeleton import POSE_DIM
@@ -150,20 +149,10 @@ def prior_sample(
     shape: tuple, temperature: float, generator: torch.Generator | None, like: torch.Tensor
 ) -> torch.Tensor:
     """``temperature * eps``, ``eps ~ N(0, I)`` of ``shape``; exactly zeros (the mode) at 0."""
-    temperature = _check_temperature(temperature)
+    temperature = check_temperature(temperature)
     if temperature == 0:
         return like.new_zeros(shape)
     return temperature * standard_normal(shape, generator, like)
-
-
-def _check_temperature(temperature: float) -> float:
-    if isinstance(temperature, bool) or not isinstance(temperature, int | float):
-        raise TypeError(f"temperature must be a number, got {type(temperature).__name__}")
-    if not (math.isfinite(temperature) and temperature >= 0):
-        raise ValueError(
-            f"temperature must be a finite number >= 0 (0 gives the mode), got {temperature}"
-        )
-    return float(temperature)
 
 
 # ---------------------------------------------------------------------------------------------
