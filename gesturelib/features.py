@@ -521,15 +521,7 @@ def voice_activity(
     """
     audio, sample_rate, fps, n_frames = _check_features_input(audio, sample_rate, fps)
     boundaries = _frame_boundaries(n_frames, sample_rate, fps)
-    # Without its DC offset: a constant is no sound (digital silence stays exact zeros).
-    samples = audio[: boundaries[-1]].astype(np.float64)
-    nonzero = samples != 0
-    if nonzero.any():
-        samples[nonzero] -= samples[nonzero].mean()
-    squares = np.square(samples)
-    energy_db = 10 * np.log10(
-        np.add.reduceat(squares, boundaries[:-1]) / np.diff(boundaries) + ENERGY_FLOOR
-    )
+    energy_db = 10 * np.log10(_frame_energy(audio, boundaries) + ENERGY_FLOOR)
     sound = energy_db > 10 * np.log10(ENERGY_FLOOR) + 1  # not digital silence
     if not sound.any():
         return np.zeros(n_frames, dtype=bool)
@@ -538,6 +530,25 @@ def voice_activity(
     voiced = sound & (energy_db > max(loud - VOICE_THRESHOLD_DB, gate))
     voiced = ~_short_runs(~voiced, round(gap_s * fps), keep_ends=True)  # fill short pauses
     return _short_runs(voiced, round(blip_s * fps), keep_ends=False)  # drop short blips
+
+
+def _frame_energy(audio: np.ndarray, boundaries: np.ndarray) -> np.ndarray:
+    """The mean square of each frame's samples ``(T,)``, without the recording's DC offset (a
+    constant is no sound; digital silence stays exact zeros), in blocks of frames so that memory
+    stays small for an hour of audio."""
+    used = audio[: boundaries[-1]]
+    nonzero = np.count_nonzero(used)
+    offset = float(used.sum(dtype=np.float64)) / nonzero if nonzero else 0.0
+    energy = np.empty(len(boundaries) - 1)
+    step = 10_000  # frames a block
+    for first in range(0, len(energy), step):
+        edges = boundaries[first : first + step + 1]
+        block = used[edges[0] : edges[-1]].astype(np.float64)
+        block[block != 0] -= offset
+        energy[first : first + len(edges) - 1] = np.add.reduceat(
+            np.square(block), edges[:-1] - edges[0]
+        ) / np.diff(edges)
+    return energy
 
 
 def who_is_talking(
@@ -768,10 +779,9 @@ def _check_signal(audio, name: str) -> np.ndarray:
         )
     if audio.size == 0:
         raise AudioError(f"{name} is empty (0 samples)")
-    not_finite = ~np.isfinite(audio)
-    if not_finite.any():
-        raise AudioError(f"{name} has {int(not_finite.sum())} NaN or infinite samples")
-    peak = float(np.abs(audio).max())
+    if not np.isfinite(audio).all():
+        raise AudioError(f"{name} has {int((~np.isfinite(audio)).sum())} NaN or infinite samples")
+    peak = max(float(audio.max()), -float(audio.min()))  # without a copy of an hour's audio
     if peak > MAX_PEAK:
         raise AudioError(
             f"{name} peaks at {peak:.3g}, far beyond full scale (1): samples must be floats in "
