@@ -100,7 +100,7 @@ def style_control(model, normaliser, conversations, samples: int, temperature: f
                 samples=samples,
                 temperature=temperature,
                 seed=0,
-                style=style,
+                style={name: percentile},
             )
             for motion in motions:
                 for sample in motion:

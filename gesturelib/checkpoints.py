@@ -213,14 +213,16 @@ def load_model(path: str | Path, model_class: type[nn.Module], device: str = "cp
     return model.to(device).eval()
 
 
-def _lock_holder(lock: Path) -> int | None:
-    """The live process that holds ``lock``, or None (gone, or the file unreadable)."""
-    try:
-        holder = int(lock.read_text().strip())
-        os.kill(holder, 0)
-    except (OSError, ValueError):
-        return None
-    return holder if holder != os.getpid() else None
+def _lock(stream) -> None:
+    """An exclusive, non-blocking lock on an open file; OSError if another process holds one."""
+    if os.name == "nt":
+        import msvcrt
+
+        msvcrt.locking(stream.fileno(), msvcrt.LK_NBLCK, 1)
+    else:
+        import fcntl
+
+        fcntl.flock(stream.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
 class RunFolder:
@@ -239,32 +241,36 @@ class RunFolder:
 
     @contextlib.contextmanager
     def writing(self):
-        """Hold the folder's lock (``.lock``, naming this process) while training writes it.
+        """Hold the folder's lock while training writes it: an operating-system lock on
+        ``.lock`` (which names the process), released even when the process dies.
 
         Raises:
-            CheckpointError: while another live process holds it.
+            CheckpointError: while another process holds it.
         """
         if self.folder.exists() and not self.folder.is_dir():
             raise CheckpointError(f"{self.folder} is a file, not a folder for checkpoints")
         self.folder.mkdir(parents=True, exist_ok=True)
-        lock = self.folder / ".lock"
-        for _ in range(2):
-            try:
-                with open(lock, "x") as stream:
-                    stream.write(str(os.getpid()))
-                break
-            except FileExistsError:
-                holder = _lock_holder(lock)
-                if holder is not None:
-                    raise CheckpointError(
-                        f"another training run (process {holder}) is writing {self.folder}; "
-                        "wait for it to end, or choose another folder"
-                    ) from None
-                lock.unlink(missing_ok=True)  # left by a run that died: take it over
+        path = self.folder / ".lock"
+        stream = open(path, "a+")  # noqa: SIM115 - held open for the whole run
+        try:
+            _lock(stream)
+        except OSError:
+            stream.seek(0)
+            holder = stream.read().strip() or "unknown"
+            stream.close()
+            raise CheckpointError(
+                f"another training run (process {holder}) is writing {self.folder}; wait for it "
+                "to end, or choose another folder"
+            ) from None
+        stream.seek(0)
+        stream.truncate()
+        stream.write(str(os.getpid()))
+        stream.flush()
         try:
             yield
         finally:
-            lock.unlink(missing_ok=True)
+            path.unlink(missing_ok=True)
+            stream.close()  # closing releases the lock
 
     def claim(self, may_differ: Iterable[str], overwrite: bool) -> None:
         """Make sure the folder is this run's: delete its checkpoints if ``overwrite``, else check
@@ -390,8 +396,9 @@ def run_key(identity: dict) -> str:
     return hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:12]
 
 
-#: Modules of the package that cannot change what training computes (they draw, write files or
-#: score motion); every other module's code is part of :func:`code_fingerprint`.
+#: Modules of the package that cannot change what training computes (they draw, write files,
+#: generate from a trained model or score motion); every other module's code is part of
+#: :func:`code_fingerprint`.
 _PRESENTATION_MODULES = frozenset(
     {
         "__main__.py",
@@ -404,6 +411,8 @@ _PRESENTATION_MODULES = frozenset(
         "viz.py",
         "widgets.py",
         "evaluation/figures.py",
+        "outputs.py",
+        "sampling.py",
         "evaluation/headline.py",
         "evaluation/report.py",
         "evaluation/rules.py",

@@ -568,7 +568,8 @@ def main(argv: list[str] | None = None) -> int:
             print("Open agent.mp4 to watch and hear the agent.")
     except KeyboardInterrupt:
         advice = (
-            f"; the run in {args.out} continues with the same command and --resume"
+            f"; the run in {args.out} continues with the same command and --resume (in place "
+            "of --overwrite)"
             if args.command == "train" and (Path(args.out) / "last.pt").exists()
             else ""
         )

@@ -58,40 +58,54 @@ class OutputFolder:
         if self.path.exists() and not self.path.is_dir():
             raise OutputError(f"{self.path} exists and is not a folder; choose another --out")
         self.written = self._record()
-        foreign = self._foreign()
-        if foreign and not overwrite:
+        foreign = [] if overwrite else self._foreign()
+        if foreign:
             raise OutputError(
                 f"{self.path} holds {foreign[0]}"
-                + (f" and {len(foreign) - 1} more" if len(foreign) > 1 else "")
+                + (f" and other files ({len(foreign) - 1}+)" if len(foreign) > 1 else "")
                 + f", which `{command}` did not write or which changed since; choose another "
                 "--out, or pass --overwrite to replace files of the same names (no others)"
             )
 
     def _record(self) -> dict[str, str]:
-        """The files an earlier command wrote here, by relative path: their SHA-256."""
+        """The files an earlier command wrote here, by relative path: their SHA-256. A record
+        that is damaged, of an older version or names a path outside the folder vouches for
+        nothing."""
         marker = self.path / MARKER
         if not marker.is_file():
             return {}
         try:
-            record = json.loads(marker.read_text(encoding="utf-8"))
-            files = record["files"]
+            files = json.loads(marker.read_text(encoding="utf-8"))["files"]
             assert isinstance(files, dict)
         except (ValueError, KeyError, TypeError, AssertionError):
-            return {}  # an older or damaged record vouches for nothing
+            return {}
+        inside = self.path.resolve()
+        for name in files:
+            if not (self.path / str(name)).resolve().is_relative_to(inside):
+                return {}
         return {str(name): str(digest) for name, digest in files.items()}
 
-    def _foreign(self) -> list[str]:
-        """Files here that no command wrote, or that changed since one did."""
+    def _unchanged(self, name: str) -> bool:
+        """Whether the file ``name`` is as this folder's record says a command wrote it."""
+        file = self.path / name
+        return name in self.written and file.is_file() and _digest(file) == self.written[name]
+
+    def _foreign(self, limit: int = 10) -> list[str]:
+        """Up to ``limit`` files here that no command wrote, or that changed since one did."""
         if not self.path.is_dir():
             return []
         found = []
-        for file in sorted(p for p in self.path.rglob("*") if p.is_file() or p.is_symlink()):
+        for file in self.path.rglob("*"):
+            if file.is_dir() and not file.is_symlink():
+                continue
             name = file.relative_to(self.path).as_posix()
             if name == MARKER or name.startswith(".gesturelib-staging"):
                 continue
-            if self.written.get(name) != (_digest(file) if file.is_file() else None):
+            if not self._unchanged(name):
                 found.append(name)
-        return found
+                if len(found) == limit:
+                    break
+        return sorted(found)
 
     def staging(self) -> _Staging:
         """A context whose files move into the folder when it ends without an error."""
@@ -103,22 +117,26 @@ class OutputFolder:
             for p in sorted(stage.rglob("*"))
             if p.is_file()
         }
+        for name in new:  # every check before anything moves
+            if (self.path / name).is_dir():
+                raise OutputError(
+                    f"{self.path / name} is a folder where `{self.command}` writes a file"
+                )
+        # The previous run's files that this one does not replace, unless a person changed them.
+        stale = [name for name in self.written if name not in new and self._unchanged(name)]
         for name in new:
             target = self.path / name
             target.parent.mkdir(parents=True, exist_ok=True)
-            if target.is_dir():
-                raise OutputError(f"{target} is a folder where `{self.command}` writes a file")
             os.replace(stage / name, target)
-        for name in set(self.written) - set(new):  # the previous run's files this one replaces
-            stale = self.path / name
-            stale.unlink(missing_ok=True)
-            for parent in stale.parents:
-                if parent == self.path or any(parent.iterdir()):
-                    break
-                parent.rmdir()
         record = {"command": self.command, "files": new}
         (self.path / MARKER).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
         self.written = new
+        for name in stale:
+            (self.path / name).unlink(missing_ok=True)
+            for parent in (self.path / name).parents:
+                if parent == self.path or not parent.is_dir() or any(parent.iterdir()):
+                    break
+                parent.rmdir()
         return [self.path / name for name in new]
 
 

@@ -225,6 +225,10 @@ def generate(model, normaliser, speech, activity, progress: bool = False, **opti
     """
     from tqdm.auto import tqdm
 
+    if len(activity) != len(speech):
+        raise ValueError(
+            f"activity must hold one code per speech frame ({len(speech)}), got {len(activity)}"
+        )
     stream = Stream(model, normaliser, **options)
     step = _PROGRESS_STEP if progress else max(len(speech), 1)
     parts = []

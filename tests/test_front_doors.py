@@ -470,14 +470,54 @@ def test_the_explorer_names_what_is_wrong_with_its_inputs(shipped):
 def test_a_second_training_run_in_one_folder_is_told_another_is_writing(
     tiny_data, tmp_path, capsys
 ):
-    import os
+    import fcntl
 
     run = tmp_path / "run"
     run.mkdir()
-    (run / ".lock").write_text(str(os.getppid()))  # a live process holds the folder
     command = ["train", "cvae", "--out", str(run), "--quick", "--data", str(tiny_data)]
-    assert main([*command, "--overwrite"]) == 2
-    assert "another training run" in one_line_error(capsys, "train")
-    (run / ".lock").write_text("999999999")  # a run that died: its lock is taken over
+    with open(run / ".lock", "w") as held:  # another run holds the folder
+        held.write("4242")
+        held.flush()
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        assert main([*command, "--overwrite"]) == 2
+        assert "another training run (process 4242)" in one_line_error(capsys, "train")
+    # a lock file left by a run that died holds no lock: the next run takes the folder
     assert main([*command, "--overwrite"]) == 0
     assert not (run / ".lock").exists()
+
+
+def test_an_output_record_cannot_reach_outside_its_folder(tmp_path):
+    from gesturelib.outputs import MARKER, OutputError, OutputFolder
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("mine")
+    out = tmp_path / "out"
+    out.mkdir()
+    record = {"command": "generate", "files": {"../victim.txt": "0" * 64}}
+    (out / MARKER).write_text(json.dumps(record))
+    folder = OutputFolder(out, "generate")
+    with folder.staging() as stage:
+        stage.path("motion.npz").write_text("new")
+    assert victim.read_text() == "mine"
+    (out / "motion.npz").write_text("changed by hand")
+    with pytest.raises(OutputError, match="motion.npz"):
+        OutputFolder(out, "generate")
+
+
+def test_overwrite_never_removes_an_earlier_file_a_person_changed(moglow_run, recording, tmp_path):
+    out = tmp_path / "out"
+    assert generate(moglow_run, recording, out, "--no-video", "--samples", "2") == 0
+    (out / "sample-2" / "agent.bvh").write_text("my edit")
+    shutil.rmtree(out / "sample-1")  # and a folder of the earlier run is gone
+    assert generate(moglow_run, recording, out, "--no-video", "--overwrite") == 0
+    assert (out / "sample-2" / "agent.bvh").read_text() == "my edit"
+    assert not (out / "sample-2" / "motion.npz").exists()  # the unchanged stale file went
+    assert generate(moglow_run, recording, out, "--no-video", "--seed", "3") == 2  # the edit
+
+
+def test_generate_refuses_activity_of_another_length(shipped):
+    from gesturelib.sampling import generate as sample
+
+    speech_frames, activity = features_of()
+    with pytest.raises(ValueError, match="one code per speech frame"):
+        sample(*shipped, speech_frames, np.concatenate([activity, activity]))

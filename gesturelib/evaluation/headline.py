@@ -141,7 +141,8 @@ def reference_motions(
 
 def generate_for(conversations, model, normaliser, **options) -> list[np.ndarray]:
     """Keypoints ``(samples, T, 9, 3)`` generated for each conversation from its audio and who is
-    talking (never its motion); ``options`` as for :func:`gesturelib.pipeline.speech_to_motion`."""
+    talking (never its motion); ``options`` as for :func:`gesturelib.pipeline.speech_to_motion`
+    (``style`` as percentiles by name)."""
     from gesturelib.pipeline import speech_to_motion
 
     return [
