@@ -24,6 +24,8 @@ from pathlib import Path
 
 #: The record of what a command wrote into a folder: ``{"command": ..., "files": {path: sha256}}``.
 MARKER = ".gesturelib-output"
+#: How the marker began before it recorded files (version 0.1's folders, taken as written whole).
+_OLD_MARKER = "This folder was written by `python -m gesturelib"
 
 
 class OutputError(Exception):
@@ -74,8 +76,15 @@ class OutputFolder:
         marker = self.path / MARKER
         if not marker.is_file():
             return {}
+        text = marker.read_text(encoding="utf-8", errors="replace")
+        if text.startswith(_OLD_MARKER):  # written before records: its files were all ours
+            return {
+                p.relative_to(self.path).as_posix(): _digest(p)
+                for p in self.path.rglob("*")
+                if p.is_file() and p.name != MARKER
+            }
         try:
-            files = json.loads(marker.read_text(encoding="utf-8"))["files"]
+            files = json.loads(text)["files"]
             assert isinstance(files, dict)
         except (ValueError, KeyError, TypeError, AssertionError):
             return {}

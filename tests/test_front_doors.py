@@ -521,3 +521,16 @@ def test_generate_refuses_activity_of_another_length(shipped):
     speech_frames, activity = features_of()
     with pytest.raises(ValueError, match="one code per speech frame"):
         sample(*shipped, speech_frames, np.concatenate([activity, activity]))
+
+
+def test_a_folder_written_before_records_is_taken_as_the_commands_own(
+    moglow_run, recording, tmp_path
+):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".gesturelib-output").write_text(
+        "This folder was written by `python -m gesturelib generate`.\n"
+    )
+    (out / "agent.mp4").write_bytes(b"an old video")
+    assert generate(moglow_run, recording, out, "--no-video") == 0
+    assert not (out / "agent.mp4").exists()  # the old run's video went with it
