@@ -59,6 +59,11 @@ class OutputFolder:
         self.path, self.command, self.overwrite = Path(path), command, overwrite
         if self.path.exists() and not self.path.is_dir():
             raise OutputError(f"{self.path} exists and is not a folder; choose another --out")
+        if (self.path / MARKER).exists() and not (self.path / MARKER).is_file():
+            raise OutputError(
+                f"{self.path / MARKER} is not a file; the commands keep their record of what "
+                "they wrote there: rename or remove it"
+            )
         self.written = self._record()
         foreign = [] if overwrite else self._foreign()
         if foreign:

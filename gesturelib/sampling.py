@@ -305,5 +305,7 @@ def _generators(seed, samples: int):
         return seed
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
         raise TypeError(f"seed must be an int, a torch.Generator or None, got {seed!r}")
+    if seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed}")
     states = np.random.SeedSequence(int(seed)).spawn(samples)
     return [torch.Generator().manual_seed(int(s.generate_state(1)[0])) for s in states]

@@ -534,3 +534,18 @@ def test_a_folder_written_before_records_is_taken_as_the_commands_own(
     (out / "agent.mp4").write_bytes(b"an old video")
     assert generate(moglow_run, recording, out, "--no-video") == 0
     assert not (out / "agent.mp4").exists()  # the old run's video went with it
+
+
+def test_a_folder_in_place_of_the_output_record_is_named(moglow_run, recording, tmp_path, capsys):
+    out = tmp_path / "out"
+    (out / ".gesturelib-output").mkdir(parents=True)
+    assert generate(moglow_run, recording, out, "--no-video") == 2
+    assert ".gesturelib-output is not a file" in one_line_error(capsys, "generate")
+
+
+def test_a_negative_seed_is_named(shipped):
+    from gesturelib.sampling import generate as sample
+
+    speech_frames, activity = features_of()
+    with pytest.raises(ValueError, match="seed must be a non-negative integer, got -1"):
+        sample(*shipped, speech_frames, activity, seed=-1)
