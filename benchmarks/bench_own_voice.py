@@ -22,6 +22,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from gesturelib.evaluation import speaking_listening_ratio, stroke_lead
 from gesturelib.features import load_audio
@@ -51,6 +52,7 @@ def main() -> None:
     if len({run.name for run in runs}) < len(runs):
         parser.error("give run folders of different names: the table is headed by them")
     recordings = sorted(VOICES.glob("*.flac"))
+    torch.set_num_threads(1)  # frame-by-frame generation is small work: one thread is fastest
 
     results = {}  # run name -> [(ratio, leads) per recording]
     for run in runs:

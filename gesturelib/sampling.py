@@ -227,7 +227,7 @@ def generate(model, normaliser, speech, activity, progress: bool = False, **opti
 
     if len(activity) != len(speech):
         raise ValueError(
-            f"activity must hold one code per speech frame ({len(speech)}), got {len(activity)}"
+            f"activity must be ({len(speech)},) codes, one per speech frame, got {len(activity)}"
         )
     stream = Stream(model, normaliser, **options)
     step = _PROGRESS_STEP if progress else max(len(speech), 1)

@@ -27,7 +27,7 @@ def test_demo_writes_a_video_with_sound_pictures_and_the_raw_files(demo_folder):
 
 
 def test_demo_runs_again_into_its_own_folder(demo_folder):
-    assert main(["demo", "--out", str(demo_folder), "--seconds", "2", "--seed", "3"]) == 0
+    assert main(["demo", "--out", str(demo_folder), "--seconds", "4.5", "--seed", "3"]) == 0
 
 
 def test_demo_never_writes_into_a_folder_of_other_files(tmp_path, capsys):

@@ -161,8 +161,10 @@ def test_write_dataset_refuses_sizes_that_cannot_work_before_writing(tmp_path):
         ConfigError, match="draws no phrase in conversation_s = 2 s.*conversation_s at least 4.1 s"
     ):
         write_dataset(out, 0.1, 0, conversation_s=2.0, progress=False)
-    with pytest.raises(ConfigError, match="30000 conversations, more than the 10000"):
-        write_dataset(out, 1000.0, 0, conversation_s=2.0, progress=False)
+    with pytest.raises(ConfigError, match="15000 conversations, more than the 10000"):
+        write_dataset(out, 500.0, 0, conversation_s=2.0, progress=False)
+    with pytest.raises(ConfigError, match="more than the 600 minutes"):
+        write_dataset(out, 1000.0, 0, conversation_s=60.0, progress=False)
     with pytest.raises(ConfigError, match="conversation_s = 601 s is longer than MAX_DURATION_S"):
         write_dataset(out, 30.0, 0, conversation_s=601.0, progress=False)
     assert not out.exists()

@@ -519,7 +519,7 @@ def test_generate_refuses_activity_of_another_length(shipped):
     from gesturelib.sampling import generate as sample
 
     speech_frames, activity = features_of()
-    with pytest.raises(ValueError, match="one code per speech frame"):
+    with pytest.raises(ValueError, match="one per speech frame"):
         sample(*shipped, speech_frames, np.concatenate([activity, activity]))
 
 
