@@ -111,6 +111,7 @@ def run_generate(args) -> list[Path]:
     from gesturelib.features import AudioError, load_audio
     from gesturelib.pipeline import speech_to_motion
     from gesturelib.pretrained import load_run
+    from gesturelib.sampling import NonFiniteMotionError
 
     model, normaliser, _ = load_run(args.run, args.device)
     if not hasattr(model, "step"):
@@ -156,6 +157,8 @@ def run_generate(args) -> list[Path]:
         )
     except AudioError as error:
         raise CommandError(f"{heard}: {error}") from error
+    except NonFiniteMotionError as error:
+        raise CommandError(f"{args.run}: {error}") from error
     with folder.staging() as stage:
         for number, (rotations, positions) in enumerate(
             zip(motion.rotations, motion.positions, strict=True), start=1

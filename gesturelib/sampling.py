@@ -41,6 +41,11 @@ from gesturelib.runtime import device_of, standard_normal
 from gesturelib.skeleton import NUM_JOINTS, POSE_DIM
 from gesturelib.style import STYLE_FEATURES
 
+
+class NonFiniteMotionError(ValueError):
+    """A model gave a NaN or infinite pose: its weights are damaged, or it diverged."""
+
+
 #: Silence as :func:`~gesturelib.features.speech_features` gives it (the noise floor): what the
 #: speech window holds beyond either end of a recording.
 SILENCE = 0.0
@@ -174,7 +179,7 @@ class Stream:
                     frame["style"] = self.style
                 pose, self.state = self.model.step(frame, self.state, self._noise())
                 if not torch.isfinite(pose).all():
-                    raise ValueError(
+                    raise NonFiniteMotionError(
                         f"the model's pose for frame {self.next_frame} is NaN or infinite: its "
                         "weights are damaged or it diverged; retrain it"
                     )

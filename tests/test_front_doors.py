@@ -549,3 +549,15 @@ def test_a_negative_seed_is_named(shipped):
     speech_frames, activity = features_of()
     with pytest.raises(ValueError, match="seed must be a non-negative integer, got -1"):
         sample(*shipped, speech_frames, activity, seed=-1)
+
+
+def test_a_model_whose_weights_blow_up_is_named(moglow_run, recording, tmp_path, capsys):
+    def huge(checkpoint):
+        for value in checkpoint["model"].values():
+            if value.is_floating_point():
+                value.mul_(1e4)
+
+    run = damaged_copy(moglow_run, tmp_path, huge)
+    assert generate(run, recording, tmp_path / "out", "--no-video") == 2
+    error = one_line_error(capsys, "generate")
+    assert str(run) in error and "NaN or infinite" in error
