@@ -88,3 +88,10 @@ def test_own_voice_benchmark_reports_each_recording():
     ratios = [float(row.split("|")[2]) for row in rows]
     median = re.search(r"moglow: median ratio ([0-9.]+)", output)
     assert median and float(median[1]) == pytest.approx(sorted(ratios)[2], abs=0.006)
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")
+def test_long_audio_benchmark_reports_each_stage():
+    output = run("bench_long_audio.py", "--minutes", "1")
+    for stage in ("load_audio", "+ who_is_talking", "+ speech_features"):
+        assert re.search(rf"{re.escape(stage)}: peak +\d+ MB", output), output
