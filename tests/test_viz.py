@@ -114,6 +114,36 @@ def test_save_animation_muxes_the_audio_into_an_mp4(motion, tmp_path):
         viz.save_animation(viz.animate(motion), path)
 
 
+def test_the_fast_frames_are_the_full_redraw(motion):
+    """save_animation draws the still parts once; each frame must be what a full redraw gives."""
+    anim = viz.animate([motion, motion[::-1]], titles=["a", "b"], stride=7)
+    width, height = anim.frame_size()
+    frames = list(anim.rgba_frames())
+    assert len(frames) == len(anim.frames) and len(frames[0]) == width * height * 4
+    for index in (0, len(frames) // 2, len(frames) - 1):
+        for artist in anim.draw(anim.frames[index]):
+            artist.set_animated(False)
+        anim.figure.canvas.draw()
+        redrawn = bytes(anim.figure.canvas.buffer_rgba())
+        assert frames[index] == redrawn, f"frame {index} differs from a full redraw"
+
+
+def test_save_animation_writes_any_matplotlib_animation(tmp_path):
+    """An animation not made by viz.animate goes through matplotlib's own writer."""
+    from matplotlib import animation as mpl_animation
+
+    figure, ax = plt.subplots()
+    (line,) = ax.plot([0, 1], [0, 0])
+    anim = mpl_animation.FuncAnimation(
+        figure, lambda k: line.set_ydata([0, k]) or [line], frames=5, interval=40
+    )
+    audio = np.zeros(8000, dtype=np.float32)
+    path = viz.save_animation(anim, tmp_path / "b.mp4", audio=audio, sample_rate=16000)
+    streams = _streams(path)
+    assert "Video: h264" in streams and "Audio: aac" in streams
+    plt.close(figure)
+
+
 def test_save_animation_falls_back_to_gif_without_ffmpeg(motion, tmp_path, monkeypatch):
     monkeypatch.setattr(viz, "ffmpeg_executable", lambda: None)
     path = viz.save_animation(viz.animate(motion, stride=4), tmp_path / "a.mp4")
