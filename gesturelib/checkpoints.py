@@ -397,8 +397,8 @@ def run_key(identity: dict) -> str:
 
 
 #: Modules of the package that cannot change what training computes (they draw, write files,
-#: generate from a trained model or score motion); every other module's code is part of
-#: :func:`code_fingerprint`.
+#: generate from a trained model or score motion): :func:`code_fingerprint` does not follow
+#: imports into them.
 _PRESENTATION_MODULES = frozenset(
     {
         "__main__.py",
@@ -421,19 +421,56 @@ _PRESENTATION_MODULES = frozenset(
 )
 
 
+def _module_path(package: Path, dotted: str) -> Path | None:
+    """The file of module ``gesturelib.a.b`` (``a/b.py``, or a package's ``__init__.py``), or
+    None for a name that is not a submodule of gesturelib (the package's own ``__init__``, which
+    only gathers names, included)."""
+    parts = dotted.split(".")
+    if parts[0] != "gesturelib" or len(parts) < 2:
+        return None
+    for candidate in (
+        package.joinpath(*parts[1:]).with_suffix(".py"),
+        package.joinpath(*parts[1:], "__init__.py"),
+    ):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _imported_modules(tree: ast.Module) -> set[str]:
+    """The gesturelib modules a module imports, anywhere in it (``from gesturelib.a import b``
+    names ``gesturelib.a`` and, if it is a module, ``gesturelib.a.b``)."""
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names |= {a.name for a in node.names if a.name.split(".")[0] == "gesturelib"}
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "gesturelib":
+            names.add(node.module)
+            names |= {f"{node.module}.{a.name}" for a in node.names}
+    return names
+
+
 @functools.cache
-def code_fingerprint() -> str:
-    """A hash of the code that determines what training computes: every module of gesturelib but
-    the presentation ones, as parsed syntax without docstrings, so that a comment, a docstring or
-    a reformat keeps cached runs, and any other change trains afresh instead of reusing a run of
-    older code."""
+def code_fingerprint(*roots: str) -> str:
+    """A hash of the code that training runs: the modules ``roots`` (dotted names, e.g. the
+    model's module and ``gesturelib.train``) and every gesturelib module they import, transitively,
+    but the presentation ones; as parsed syntax without docstrings, so that a comment, a docstring
+    or a reformat keeps cached runs, a change to one model's code retrains that model alone, and
+    any other change trains afresh instead of reusing a run of older code."""
     package = Path(__file__).resolve().parent
-    digest = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
+    pending, trees = list(roots), {}
+    while pending:
+        path = _module_path(package, pending.pop())
+        if path is None or path in trees:
+            continue
         name = path.relative_to(package).as_posix()
         if name in _PRESENTATION_MODULES:
             continue
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        trees[path] = tree = ast.parse(path.read_text(encoding="utf-8"))
+        pending.extend(_imported_modules(tree))
+    digest = hashlib.sha256()
+    for path in sorted(trees):
+        tree = trees[path]
         for node in ast.walk(tree):
             body = getattr(node, "body", None)
             if (
@@ -444,5 +481,6 @@ def code_fingerprint() -> str:
                 and isinstance(body[0].value.value, str)
             ):
                 node.body = body[1:] or [ast.Pass()]
+        name = path.relative_to(package).as_posix()
         digest.update(name.encode() + b"\0" + ast.dump(tree).encode() + b"\0")
     return digest.hexdigest()[:12]

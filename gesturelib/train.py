@@ -59,6 +59,10 @@ from gesturelib.runtime import device, device_of
 
 #: Training-config fields that change how a run executes, not what it computes.
 EXECUTION_FIELDS = frozenset({"device", "num_workers"})
+#: The code every cached run depends on, besides its model's module (the cache key's
+#: :func:`~gesturelib.checkpoints.code_fingerprint` follows their imports): the training loop and
+#: the windows and normalisation of the data.
+_TRAINING_CODE = ("gesturelib.train", "gesturelib.data")
 #: Fields that may differ when resuming: also ``epochs``, so that a finished run can be extended.
 RESUMABLE_FIELDS = EXECUTION_FIELDS | {"epochs"}
 
@@ -513,7 +517,12 @@ def load_or_train(
     identity = _identity(model, train_config, fingerprint)
     key_config = {k: v for k, v in identity["train_config"].items() if k not in EXECUTION_FIELDS}
     key = run_key(
-        {**identity, "train_config": key_config, "version": VERSION, "code": code_fingerprint()}
+        {
+            **identity,
+            "train_config": key_config,
+            "version": VERSION,
+            "code": code_fingerprint(*_TRAINING_CODE, model_class.__module__),
+        }
     )
     folder = Path(cache_dir) / f"{model_class.__name__}-{key}"
     best = RunFolder(folder, identity).best

@@ -701,18 +701,33 @@ def test_the_code_fingerprint_ignores_docstrings_and_sees_code(tmp_path, monkeyp
 
     package = tmp_path / "gesturelib"
     package.mkdir()
-    module = package / "model.py"
     fake = package / "checkpoints.py"
     fake.write_text("")
+    monkeypatch.setattr(checkpoints, "__file__", str(fake))
 
-    def fingerprint(source):
-        module.write_text(source)
+    def fingerprint(root="gesturelib.model", **sources):
+        for name, source in sources.items():
+            (package / f"{name}.py").write_text(source)
         checkpoints.code_fingerprint.cache_clear()
-        monkeypatch.setattr(checkpoints, "__file__", str(fake))
-        return checkpoints.code_fingerprint()
+        return checkpoints.code_fingerprint(root)
 
-    base = fingerprint('"""A model."""\n\ndef f(x):\n    """Twice."""\n    return 2 * x\n')
-    reworded = fingerprint('"""Another word."""\n\n\ndef f(x):  # a comment\n    return 2 * x\n')
-    changed = fingerprint('"""A model."""\n\ndef f(x):\n    """Twice."""\n    return 3 * x\n')
+    helper = "from gesturelib.viz import draw\n\ndef scale():\n    return 2\n"
+    base = fingerprint(
+        model='"""A model."""\nfrom gesturelib.helper import scale\n\ndef f(x):\n'
+        '    """Twice."""\n    return scale() * x\n',
+        helper=helper,
+        other="def g():\n    return 1\n",
+        viz="def draw():\n    return 1\n",
+    )
+    reworded = fingerprint(
+        model='"""Another word."""\nfrom gesturelib.helper import scale\n\n\n'
+        "def f(x):  # a comment\n    return scale() * x\n"
+    )
+    assert reworded == base
+    # Code the model does not import (another model, a presentation module) is not its code.
+    assert fingerprint(other="def g():\n    return 2\n") == base
+    assert fingerprint(viz="def draw():\n    return 2\n") == base
+    # Code it imports, directly or not, is.
+    assert fingerprint(helper=helper.replace("return 2", "return 3")) != base
+    assert fingerprint(root="gesturelib.other") != base
     checkpoints.code_fingerprint.cache_clear()
-    assert base == reworded != changed
