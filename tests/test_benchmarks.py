@@ -95,3 +95,18 @@ def test_long_audio_benchmark_reports_each_stage():
     output = run("bench_long_audio.py", "--minutes", "1")
     for stage in ("load_audio", "+ who_is_talking", "+ speech_features"):
         assert re.search(rf"{re.escape(stage)}: peak +\d+ MB", output), output
+
+
+def test_the_quality_benchmark_scores_each_seed_and_their_spread():
+    output = run(
+        "bench_quality.py",
+        *("flowvae", "--quick", "--seeds", "0", "1", "--samples", "2"),
+        *("--change", "residual=True", "leak=0.1", "detach_prior=True", "latent_noise=0.0"),
+    )
+    rows = [row for row in output.splitlines() if row.startswith("flowvae residual=True")]
+    assert [row.split(" | ")[1] for row in rows] == ["seed 0", "seed 1", "mean ± sd over 2 seeds"]
+    for column in ("hellinger", "jerk", "fgd", "ratio", "nods", "head_speed", "drift", "minutes"):
+        assert all(re.search(rf"\b{column} [-\d.]", row) for row in rows), (column, output)
+    assert re.search(r"ground truth: head_speed \d+", output)
+    refused = launch("bench_quality.py", "flowvae", "--quick", "--change", "lek=0.1")
+    assert refused.returncode == 2 and "unexpected keyword argument 'lek'" in refused.stderr

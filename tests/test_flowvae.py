@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from gesturelib.checkpoints import CheckpointMismatchError, load_model
 from gesturelib.features import speech_features
@@ -73,8 +74,14 @@ def identity_flow(model):
 
 @pytest.mark.parametrize(
     "config",
-    [PAPER, ELBO, dataclasses.replace(PAPER, residual=True)],
-    ids=["paper", "elbo", "residual"],
+    [
+        PAPER,
+        ELBO,
+        dataclasses.replace(PAPER, residual=True),
+        dataclasses.replace(PAPER, residual=True, leak=0.2),
+        dataclasses.replace(ELBO, residual=True, leak=0.2),
+    ],
+    ids=["paper", "elbo", "residual", "leak", "elbo-leak"],
 )
 def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config):
     _, normaliser, batch, _ = data
@@ -96,22 +103,33 @@ def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config):
             frame = {name: part[:, t : t + 1] for name, part in batch.items()}
             pose, state = model.step(frame, state, z[:, t])
             frames.append(pose)
-    # A residual model adds each change to the last generated latent, from the encoding of the
-    # past pose before the first frame.
-    latents = model._origin(batch)[:, :1] + drawn.cumsum(1) if config.residual else drawn
+    # A residual model adds each change to the last generated latent moved `leak` of the way
+    # to the mean pose's, starting from the encoding of the past pose before the first frame.
+    latents = drawn
+    if config.residual:
+        last = model.encode(batch["past_pose"][:, :1, -1])
+        rest = model.encode(torch.zeros(54, dtype=torch.float64))
+        steps = []
+        for t in range(drawn.shape[1]):
+            last = drawn[:, t : t + 1] + last - config.leak * (last - rest)
+            steps.append(last)
+        latents = torch.cat(steps, dim=1)
     torch.testing.assert_close(torch.stack(frames, dim=1), model.decode(latents))
 
 
-@pytest.mark.parametrize("residual", [False, True])
-def test_each_term_of_the_papers_loss_on_a_known_answer(data, residual):
+@pytest.mark.parametrize("residual, leak", [(False, 0.0), (True, 0.0), (True, 0.3)])
+def test_each_term_of_the_papers_loss_on_a_known_answer(data, residual, leak):
     _, normaliser, batch, _ = data
-    config = dataclasses.replace(PAPER, latent_noise=0.0, alpha=0.3, residual=residual)
+    config = dataclasses.replace(PAPER, latent_noise=0.0, alpha=0.3, residual=residual, leak=leak)
     model = identity_flow(build(config, normaliser, batch, perturb=False)).double()
     batch = {name: part.double() for name, part in batch.items()}
     pose, length = batch["pose"], batch["pose"].shape[1]
     terms = model.loss(batch)
     latent = model.encode(pose)
-    origin = model.encode(batch["past_pose"][:, :, -1]) if residual else 0.0  # e(x_{t-1})
+    origin = 0.0
+    if residual:  # e(x_{t-1}), moved `leak` of the way to the mean pose's latent e(0)
+        last = model.encode(batch["past_pose"][:, :, -1])
+        origin = last - leak * (last - model.encode(torch.zeros(54, dtype=torch.float64)))
     # A rotation keeps lengths and has log-determinant 0: NLL is the standard normal's.
     change = latent - origin
     nll = (0.5 * change.square().sum(-1) + 0.5 * 4 * math.log(2 * math.pi)).sum(1).mean() / length
@@ -128,6 +146,34 @@ def test_each_term_of_the_papers_loss_on_a_known_answer(data, residual):
     without = FlowVAE(dataclasses.replace(config, sample_weight=0.0)).double()
     without.load_state_dict(model.state_dict())
     torch.testing.assert_close(without.eval().loss(batch)["loss"], 0.3 * nll + terms["mse"])
+
+
+@pytest.mark.parametrize("residual", [False, True])
+def test_a_detached_prior_trains_the_flow_alone(data, residual):
+    """With detach_prior the NLL's gradient reaches the flow and the control encoder, never the
+    autoencoder: the encoder's gradient is the reconstruction's alone."""
+    _, normaliser, batch, _ = data
+    config = dataclasses.replace(
+        PAPER, latent_noise=0.0, sample_weight=0.0, alpha=1.0, residual=residual
+    )
+    gradients = {}
+    for detach in (False, True):
+        model = build(dataclasses.replace(config, detach_prior=detach), normaliser, batch).double()
+        batch64 = {name: part.double() for name, part in batch.items()}
+        terms = model.loss(batch64)
+        model.zero_grad()
+        terms["loss"].backward()
+        encoder = [p.grad.clone() for p in model.encoder.parameters()]
+        flow = [p.grad.clone() for p in model.flow.parameters() if p.grad is not None]
+        model.zero_grad()
+        mse = F.mse_loss(model.decode(model.encode(batch64["pose"])), batch64["pose"])
+        mse.backward()
+        reconstruction = [p.grad.clone() for p in model.encoder.parameters()]
+        gradients[detach] = [
+            torch.allclose(a, b) for a, b in zip(encoder, reconstruction, strict=True)
+        ]
+        assert flow and any(g.abs().sum() > 0 for g in flow)
+    assert all(gradients[True]) and not all(gradients[False])
 
 
 def test_a_shrunken_latent_buys_likelihood_for_nothing_unless_the_latent_is_noisy(data):
@@ -240,6 +286,9 @@ def test_a_flowvae_trains_and_its_run_folder_is_no_moglows(data, tmp_path):
         ({"latent_dim": 1}, "latent_dim must be between 2 and 53"),
         ({"sample_weight": float("nan")}, "sample_weight must be a finite number >= 0"),
         ({"residual": True, "past_poses": 0}, "past_poses >= 1"),
+        ({"leak": 0.1}, "it needs residual=True"),
+        ({"residual": True, "leak": 1.5}, "leak must be"),
+        ({"detach_prior": 1}, "detach_prior"),
     ],
 )
 def test_bad_configs_get_named_errors(changes, message):

@@ -21,7 +21,12 @@ encoder is deterministic, so NLL(h) is not a likelihood of ``x``: the encoder ca
 without end by shrinking ``h``, and the decoder can undo the shrinking. The remedy here is
 ``latent_noise``: the flow and the decoder see ``h + sigma * eps`` with a fixed ``sigma``, so a
 shrunken latent drowns in the noise and can no longer be decoded. That makes the encoder a
-Gaussian with fixed variance, and the loss a weighted, beta-VAE-like objective.
+Gaussian with fixed variance, and the loss a weighted, beta-VAE-like objective. The noise has a
+price: the flow learns the latents *with* their noise, so every generated frame carries a fresh
+draw of it, which the decoder turns into jitter. The other remedy is ``detach_prior``: the NLL's
+gradient stops at ``h``, so it trains the flow (and the control encoder) to model the latents the
+autoencoder makes, and never the encoder to make latents that are easy to model; the encoder has
+no reason to shrink, and no noise is needed (``latent_noise=0``).
 
 :class:`VariationalFlowVAE` makes it a true ELBO on ``log p(x | c)``: a Gaussian encoder
 ``q(h | x)``, the flow as the conditional prior ``p(h | c)``, and a Gaussian decoder with a
@@ -33,13 +38,19 @@ estimated with one draw of ``h``. Like MoGlow it models poses with a little nois
 surface (:mod:`gesturelib.pose_surface`), so its bound and MoGlow's likelihood are in the same
 nats. Generation decodes the decoder's mean.
 
-The flow models the latent itself given the control, as in the paper. Both models can model
-instead the change of the latent from the encoding of the last pose, ``h_t - e(x_{t-1})``, as
-MoGlow models the change of the pose (``residual=True``; a shift by a known vector, log-determinant
-0), adding each generated change to the last generated latent. Its motion is smoother, but over
-long generations it drifts away from any plausible pose: nothing pulls the latent back, since the
-control sees only decoded poses, which do not show every direction the latent can move in
-(notebook 06 measures it).
+The flow models the latent itself given the control, as in the paper; each frame's latent is a
+new draw, and the motion jitters even without noise. Both models can model instead the change of
+the latent from the encoding of the last pose, ``h_t - e(x_{t-1})``, as MoGlow models the change
+of the pose (``residual=True``; a shift by a known vector, log-determinant 0), adding each
+generated change to the last generated latent. Its motion is smooth, but over long generations it
+drifts away from any plausible pose: the small errors of each change add up, and nothing pulls
+the latent back (notebook 06 measures it; with ``latent_noise`` the noise itself adds up, a
+random walk). ``leak`` is the pull: the change is measured from the last latent moved a fraction
+``leak`` of the way towards the mean pose's latent ``e(0)``, ``h_t - (e(x_{t-1}) - leak *
+(e(x_{t-1}) - e(0)))``, still a known shift. The flow can learn to undo the pull where the data
+moves away from rest (its control shows the last poses), while the errors it cannot fit now
+decay instead of adding up. (Re-encoding each decoded pose as the origin, ``e(d(h'_{t-1}))``, is no
+remedy: encoder and decoder do not quite undo each other, and the errors grow.)
 
 Logged scalars (``loss(batch)``), all per frame: :class:`FlowVAE`: ``loss``, ``nll`` (of the
 latent, nats), ``mse`` (of ``d(h)``, per number), ``sample_mse`` (of ``d(h')``; always on the
@@ -95,6 +106,8 @@ class LatentFlowConfig(ControlConfig):
         hidden: units of each coupling's LSTM and of the control encoder (the paper: 400).
         residual: the flow models ``h_t - e(x_{t-1})`` (needs ``past_poses >= 1``), not ``h_t``;
             see the module docstring.
+        leak: with ``residual``, the fraction of the way from the last latent to the mean pose's
+            that the change is measured from (0: none; see the module docstring).
     """
 
     latent_dim: int = 16
@@ -102,12 +115,14 @@ class LatentFlowConfig(ControlConfig):
     steps: int = 4
     hidden: int = 64
     residual: bool = False
+    leak: float = 0.0
 
     def __post_init__(self):
         super().__post_init__()
         check_fields(
             self,
             positive=("latent_dim", "autoencoder_hidden", "steps", "hidden"),
+            fractions=("leak",),
             flags=("residual",),
         )
         if not 2 <= self.latent_dim < POSE_DIM:
@@ -117,6 +132,8 @@ class LatentFlowConfig(ControlConfig):
             )
         if self.residual and self.past_poses < 1:
             raise ValueError("residual=True needs the last pose in the control: past_poses >= 1")
+        if self.leak and not self.residual:
+            raise ValueError("leak pulls the latent of a residual model: it needs residual=True")
 
     @classmethod
     def quick(cls, **changes):
@@ -134,16 +151,22 @@ class FlowVAEConfig(LatentFlowConfig):
         sample_weight: weight of ``MSE(x, d(h'))``, the term with a latent drawn from the flow
             (the paper: 1; 0 leaves it out).
         latent_noise: standard deviation of the noise added to ``h`` (0: none, and the encoder
-            can shrink its latent without end; see the module docstring).
+            can shrink its latent without end unless ``detach_prior``; see the module docstring).
+        detach_prior: the NLL trains the flow alone: its gradient does not reach the encoder.
     """
 
     alpha: float = 5e-4
     sample_weight: float = 1.0
     latent_noise: float = 0.1
+    detach_prior: bool = False
 
     def __post_init__(self):
         super().__post_init__()
-        check_fields(self, non_negative=("alpha", "sample_weight", "latent_noise"))
+        check_fields(
+            self,
+            non_negative=("alpha", "sample_weight", "latent_noise"),
+            flags=("detach_prior",),
+        )
 
 
 @dataclass(frozen=True)
@@ -221,13 +244,24 @@ class _LatentFlowModel(nn.Module):
         flow_state, last = (None, None) if state is None else state
         latent, _, flow_state = self.flow.inverse(noise[:, None], self.control(frame), flow_state)
         if self.config.residual:
-            latent = latent + (self._origin(frame) if last is None else last)
+            last = self.encode(frame["past_pose"][:, :, -1]) if last is None else last
+            latent = latent + self._toward_rest(last)
         return self.decode(latent)[:, 0], (flow_state, latent)
 
+    def _toward_rest(self, last: torch.Tensor) -> torch.Tensor:
+        """A residual model's origin: the last latent ``(..., latent_dim)``, moved ``leak`` of
+        the way towards the mean pose's latent."""
+        if not self.config.leak:
+            return last
+        rest = self.encode(last.new_zeros(POSE_DIM))  # the mean pose is zero, normalised
+        return last - self.config.leak * (last - rest)
+
     def _origin(self, batch) -> torch.Tensor | float:
-        """What the flow's latents are measured from: the encoding of the last pose
-        ``(B, L, latent_dim)``, or 0."""
-        return self.encode(batch["past_pose"][:, :, -1]) if self.config.residual else 0.0
+        """What the flow's latents are measured from: for a residual model the encoding of the
+        last pose ``(B, L, latent_dim)`` (:meth:`_toward_rest`), else 0."""
+        if not self.config.residual:
+            return 0.0
+        return self._toward_rest(self.encode(batch["past_pose"][:, :, -1]))
 
     def _pose_and_control(self, batch):
         """``pose (B, L, 54)``, the encoded control, and a generator for evaluation's draws
@@ -265,7 +299,10 @@ class FlowVAE(_LatentFlowModel):
             draw = standard_normal(latent.shape, generator, pose.device, pose.dtype)
             noisy = latent + config.latent_noise * draw
         origin = self._origin(batch)
-        log_prob, _ = self.flow.log_prob(noisy - origin, control)
+        modelled = noisy - origin
+        if config.detach_prior:  # the NLL then trains the flow alone, and cannot shrink h
+            modelled = modelled.detach()
+        log_prob, _ = self.flow.log_prob(modelled, control)
         nll = -log_prob.mean() / pose.shape[1]
         mse = F.mse_loss(self.decode(noisy), pose)
         terms = {

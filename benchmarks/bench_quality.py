@@ -1,0 +1,187 @@
+"""One recipe, changed or not, from several seeds: the evaluation table's measures with spreads.
+
+The harness behind the model-quality experiments of ``docs/benchmarks.md``: trains a recipe
+(``python -m gesturelib train``'s, full mode unless ``--quick``) with the given model and training
+changes from each seed through the load-or-train cache (``checkpoints/``: the chapters' and
+``make results``' runs are reused), draws 3 samples per held-out conversation, and prints per seed
+and as mean ± sd over seeds: the wrist-speed Hellinger distance, wrist jerk, FGD, the
+speaking/listening ratio, the stroke lead, the accents hit, the listener's nods and their
+precision, the 99th percentile of the head's downward pitch speed, the drift (limb-angle error
+in the last 10 s of each held-out minute over the first 10 s), the parameters and the training
+minutes.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_quality.py moglow --seeds 0 1 2
+    .venv/bin/python benchmarks/bench_quality.py flowvae --change latent_noise=0 --train epochs=20
+    .venv/bin/python benchmarks/bench_quality.py moglow --temperature 0.8   # same models, colder
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from data_synth import course_data, load_dataset
+from gesturelib.conventions import FPS
+from gesturelib.evaluation.fgd import feature_network
+from gesturelib.evaluation.rules import head_pitch
+from gesturelib.evaluation.table import score_draw
+from gesturelib.gaps import limb_angle_error
+from gesturelib.pipeline import speech_to_motion, train_model
+from gesturelib.recipes import RECIPES
+from gesturelib.skeleton import forward_kinematics
+
+REPO = Path(__file__).resolve().parents[1]
+COLUMNS = (
+    "hellinger",
+    "jerk",
+    "fgd",
+    "ratio",
+    "lead",
+    "accent_hits",
+    "nods",
+    "nod_precision",
+    "head_speed",
+    "drift",
+    "minutes",
+)
+
+
+def parse_changes(pairs: list[str]) -> dict:
+    """``["latent_noise=0", "residual=True"]`` -> ``{"latent_noise": 0, "residual": True}``."""
+    changes = {}
+    for pair in pairs:
+        key, _, value = pair.partition("=")
+        try:
+            changes[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            changes[key] = value
+    return changes
+
+
+def head_speed(motions: list) -> float:
+    """The 99th percentile of the head's downward pitch speed (deg/s) over every frame: how
+    fast the fastest nods go (the generator's nods peak at 50-150)."""
+    speeds = [np.degrees(np.diff(head_pitch(m))) * FPS for m in motions]
+    return float(np.percentile(np.concatenate(speeds), 99))
+
+
+def drift(rotations: list, conversations) -> float:
+    """Limb-angle error to the truth in the last 10 s of each conversation over the first 10 s
+    (1: no drift), one sample's ``rotations[i]`` ``(T, 9, 6)``."""
+    chunk = 10 * FPS
+    errors = [
+        limb_angle_error(r, c.rotations).mean(axis=1)
+        for r, c in zip(rotations, conversations, strict=True)
+    ]
+    first = np.mean([e[:chunk].mean() for e in errors])
+    last = np.mean([e[-chunk:].mean() for e in errors])
+    return float(last / first)
+
+
+def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:
+    """The measures of one trained model, averaged over ``samples`` draws; ``save``: a file to
+    write the draws' keypoints to (``sample<k>_conversation<i>``, ``(T, 9, 3)``)."""
+    per_conversation = [
+        speech_to_motion(
+            trained.model,
+            trained.normaliser,
+            c.audio,
+            c.sample_rate,
+            activity=c.activity,
+            samples=samples,
+            temperature=temperature,
+            seed=0,
+            progress=False,
+        ).rotations
+        for c in test
+    ]
+    draws, saved = [], {}
+    for k in range(samples):
+        rotations = [r[k] for r in per_conversation]
+        motions = [forward_kinematics(r) for r in rotations]
+        row = score_draw(test, motions, features)
+        row["drift"] = drift(rotations, test)
+        row["head_speed"] = head_speed(motions)
+        draws.append(row)
+        saved |= {f"sample{k}_conversation{i}": m for i, m in enumerate(motions)}
+    if save is not None:
+        np.savez_compressed(save, **saved)
+    row = {key: float(np.mean([d[key] for d in draws])) for key in COLUMNS if key != "minutes"}
+    row["minutes"] = sum(trained.history.epoch_seconds) / 60
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("model", choices=list(RECIPES))
+    parser.add_argument("--change", nargs="*", default=[], help="model config fields: key=value")
+    parser.add_argument("--train", nargs="*", default=[], help="training config fields: key=value")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    parser.add_argument("--samples", type=int, default=3, help="draws per held-out conversation")
+    parser.add_argument("--temperature", type=float, default=None, help="the model's own if unset")
+    parser.add_argument("--quick", action="store_true", help="quick data and configs")
+    parser.add_argument("--save", type=Path, help="a folder for each seed's draws (.npz)")
+    args = parser.parse_args()
+    model_changes, train_changes = parse_changes(args.change), parse_changes(args.train)
+    try:  # the configs, checked before any training
+        RECIPES[args.model].settings(args.quick, model_changes, **train_changes)
+    except (TypeError, ValueError) as error:
+        parser.error(str(error))
+    torch.set_num_threads(1)
+    splits = load_dataset(course_data(args.quick))
+    test = splits["test"]
+    features = feature_network(
+        [c.positions for c in splits["train"]],
+        [c.positions for c in splits["val"]],
+        REPO / "checkpoints",
+        quick=args.quick,
+        progress=False,
+    )
+    truth = head_speed([c.positions for c in test])
+    print(f"ground truth: head_speed {truth:.4g}", flush=True)
+    label = " ".join([args.model, *args.change, *args.train]) + (
+        f" T={args.temperature}" if args.temperature is not None else ""
+    )
+    rows = []
+    for seed in args.seeds:
+        started = time.perf_counter()
+        trained = train_model(
+            args.model,
+            splits,
+            quick=args.quick,
+            seed=seed,
+            model_changes=model_changes,
+            train_changes=train_changes,
+            cache=REPO / "checkpoints",
+            progress=False,
+        )
+        save = None
+        if args.save is not None:
+            args.save.mkdir(parents=True, exist_ok=True)
+            save = args.save / f"seed{seed}.npz"
+        rows.append(score(trained, test, features, args.samples, args.temperature, save))
+        parameters = sum(p.numel() for p in trained.model.parameters())
+        print(
+            f"{label} | seed {seed} | {parameters:,} parameters | "
+            + "  ".join(f"{k} {rows[-1][k]:.4g}" for k in COLUMNS)
+            + f" | {time.perf_counter() - started:.0f} s",
+            flush=True,
+        )
+    if len(rows) > 1:
+        values = {k: np.array([r[k] for r in rows]) for k in COLUMNS}
+        print(
+            f"{label} | mean ± sd over {len(rows)} seeds | "
+            + "  ".join(f"{k} {v.mean():.4g} ± {v.std(ddof=1):.2g}" for k, v in values.items()),
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
