@@ -110,3 +110,9 @@ def test_the_quality_benchmark_scores_each_seed_and_their_spread():
     assert re.search(r"ground truth: head_speed \d+", output)
     refused = launch("bench_quality.py", "flowvae", "--quick", "--change", "lek=0.1")
     assert refused.returncode == 2 and "unexpected keyword argument 'lek'" in refused.stderr
+
+
+def test_the_video_benchmark_times_each_write():
+    output = run("bench_video.py", "--seconds", "1", "--repeats", "2")
+    assert re.search(r"1\.0 s of two motions \(25 frames\): \d+\.\d+ s, \d+\.\d+ s", output), output
+    assert re.search(r"median \d+\.\d+ s, \d+\.\d+ ms a frame", output), output
