@@ -416,7 +416,11 @@ def speech_features(
     The statistics are the recording's, so features of a clip cut from a longer recording differ
     slightly from the same frames of the whole: compute them on what the model will hear.
     """
-    log_mel = mel_spectrogram(audio, sample_rate, fps=fps, n_mels=n_mels)
+    # At the recording's own scale, so that MEL_FLOOR sits as far below a quiet recording's
+    # sound as below a loud one's: a gain then changes nothing, even beside digital silence.
+    audio = _check_signal(audio, "audio")
+    peak = float(np.max(np.abs(audio), initial=0.0))
+    log_mel = mel_spectrogram(audio / max(peak, 1e-30), sample_rate, fps=fps, n_mels=n_mels)
     loudness = log_mel.mean(axis=1)  # (T,)
     sound = loudness > np.log(MEL_FLOOR) + 1.0  # a nat above the floor of the log: not zeros
     if not sound.any():

@@ -441,6 +441,19 @@ def test_speech_features_do_not_depend_on_the_recording_level(gain):
     np.testing.assert_allclose(scaled, clean, atol=0.02)
 
 
+@pytest.mark.parametrize("gain", [0.5, 0.01, 1e-4])
+def test_a_gain_changes_nothing_beside_digital_silence(gain):
+    """A 16-bit recording whose pauses are exact zeros and whose quiet frames hold a few steps of
+    quantisation: at any gain those frames stay far above the log's floor, so nothing moves."""
+    audio = speech_between_silences(noise=1e-4, gain=0.05)
+    audio = np.round(audio * 32767) / 32767  # 16-bit steps: the quiet frames hold a few
+    audio[:8000] = 0.0  # half a second of an editor's digital silence
+    at_full_gain = features.speech_features(audio, 16000)
+    np.testing.assert_allclose(
+        features.speech_features(gain * audio, 16000), at_full_gain, atol=1e-3
+    )
+
+
 @pytest.mark.parametrize("noise", [1e-4, 0.003, 0.02])
 def test_speech_features_read_silence_as_zero_and_speech_as_one_in_any_noise(noise):
     speech = features.speech_features(speech_between_silences(noise), 16000)
