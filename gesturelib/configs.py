@@ -150,7 +150,9 @@ def config_to_dict(config) -> dict:
 
 
 def config_from_dict(config_class: type, data: dict):
-    """Inverse of :func:`config_to_dict`: unknown keys raise, missing ones take their defaults.
+    """Inverse of :func:`config_to_dict`: unknown keys raise, missing ones take their defaults, or,
+    for a field the config class lists in ``FIELDS_ADDED``, the value that runs saved before the
+    field existed were trained with.
 
     Lists become tuples (frozen configs hold sequences as tuples); a field whose type is a
     dataclass is rebuilt from its dict.
@@ -167,7 +169,7 @@ def config_from_dict(config_class: type, data: dict):
             f"{config_class.__name__} has no field(s) {unknown}; its fields are {sorted(fields)}"
         )
     types = typing.get_type_hints(config_class)
-    values = {}
+    values = dict(getattr(config_class, "FIELDS_ADDED", {}))
     for key, value in data.items():
         if dataclasses.is_dataclass(types.get(key)) and isinstance(value, dict):
             value = config_from_dict(types[key], value)

@@ -11,6 +11,7 @@ from data_synth.events import Accent, Events, Phrase
 from gesturelib.evaluation.rules import (
     BEAT_SIGMA_S,
     accent_leads,
+    answered_phrase_ends,
     beat_alignment_score,
     head_pitch,
     kinematic_beats,
@@ -114,6 +115,7 @@ def test_listening_nods_count_only_in_the_rules_window():
     ends = [2.0, 5.0, 8.0]
     # The agent speaks right after the third end: no nod is due there.
     conversation = fake_conversation(partner_ends=ends, agent_phrases=[(8.2, 9.0)])
+    np.testing.assert_allclose(answered_phrase_ends(conversation), [2.0, 5.0])
     on_time = 2.0 + config.nod_delay_s[0] + quarter + 0.05
     late = 5.0 + config.nod_delay_s[1] + quarter + 0.5
     answered = partner_nods(conversation, with_nods([on_time, late], 250))

@@ -10,6 +10,7 @@ import torch
 import torch.nn.functional as F
 
 from gesturelib.checkpoints import CheckpointMismatchError, load_model
+from gesturelib.configs import config_from_dict, config_to_dict
 from gesturelib.features import speech_features
 from gesturelib.models import (
     FlowVAE,
@@ -32,8 +33,9 @@ SIZES = dict(
     hidden=8,
     control_size=8,
 )
-PAPER = FlowVAEConfig(**SIZES)
-ELBO = VariationalFlowVAEConfig(**SIZES)
+#: The paper's model (frame by frame, its NLL training the encoder) with noise on the latent.
+PAPER = FlowVAEConfig(**SIZES, residual=False, leak=0.0, detach_prior=False, latent_noise=0.1)
+ELBO = VariationalFlowVAEConfig(**SIZES, residual=False, leak=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -80,8 +82,9 @@ def identity_flow(model):
         dataclasses.replace(PAPER, residual=True),
         dataclasses.replace(PAPER, residual=True, leak=0.2),
         dataclasses.replace(ELBO, residual=True, leak=0.2),
+        FlowVAEConfig(**SIZES),
     ],
-    ids=["paper", "elbo", "residual", "leak", "elbo-leak"],
+    ids=["paper", "elbo", "residual", "leak", "elbo-leak", "recipe"],
 )
 def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config):
     _, normaliser, batch, _ = data
@@ -278,6 +281,22 @@ def test_a_flowvae_trains_and_its_run_folder_is_no_moglows(data, tmp_path):
         load_model(tmp_path / "best.pt", MoGlow)
 
 
+@pytest.mark.parametrize("config_class", [FlowVAEConfig, VariationalFlowVAEConfig])
+@pytest.mark.parametrize("residual", [False, True])
+def test_runs_saved_before_the_pull_and_the_detached_prior_load_as_they_were_trained(
+    config_class, residual
+):
+    """A checkpoint's config without ``leak`` (and ``detach_prior``) comes from before they
+    existed: it was trained without them, whatever the defaults are now."""
+    stored = config_to_dict(config_class(**SIZES, residual=residual, leak=0.0))
+    stored.pop("leak")
+    stored.pop("detach_prior", None)
+    config = config_from_dict(config_class, stored)
+    assert config.residual == residual and config.leak == 0.0
+    assert getattr(config, "detach_prior", False) is False
+    assert config_from_dict(config_class, config_to_dict(config_class())) == config_class()
+
+
 @pytest.mark.parametrize(
     "changes, message",
     [
@@ -286,7 +305,7 @@ def test_a_flowvae_trains_and_its_run_folder_is_no_moglows(data, tmp_path):
         ({"latent_dim": 1}, "latent_dim must be between 2 and 53"),
         ({"sample_weight": float("nan")}, "sample_weight must be a finite number >= 0"),
         ({"residual": True, "past_poses": 0}, "past_poses >= 1"),
-        ({"leak": 0.1}, "it needs residual=True"),
+        ({"residual": False}, r"it needs residual=True \(for a model of the latent itself, set"),
         ({"residual": True, "leak": 1.5}, "leak must be"),
         ({"detach_prior": 1}, "detach_prior"),
     ],

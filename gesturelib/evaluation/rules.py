@@ -115,27 +115,37 @@ def on_rule_strokes(conversation, positions: np.ndarray) -> np.ndarray:
     return np.abs(strokes[:, None] - targets[None]).min(axis=1) <= STROKE_TOLERANCE_S
 
 
+def answered_phrase_ends(conversation) -> np.ndarray:
+    """Times ``(E,)`` of the partner's phrase ends that the agent answers with silence (for the
+    next ``LISTENING_WINDOW_S``): where the rules may put a listening nod."""
+    from data_synth.nods import LISTENING_WINDOW_S
+
+    agent = conversation.events.phrases_of("A", kind=None)
+    return np.array(
+        [
+            p.end
+            for p in conversation.events.phrases_of("B")
+            if not any(u.start < p.end + LISTENING_WINDOW_S and u.end > p.end for u in agent)
+        ],
+        dtype=np.float64,
+    )
+
+
 def nod_windows(conversation) -> dict[str, np.ndarray]:
     """Where the rules put the agent's nods, as ``(W, 2)`` arrays of ``[start, end]`` times (the
     time of fastest downward motion, widened by :data:`NOD_TOLERANCE_S`), by cause:
 
     * ``partner``: after each phrase end of the partner that the agent answers with silence
-      (for the next ``LISTENING_WINDOW_S``): ``nod_delay_s`` plus a quarter of the nod cycle;
+      (:func:`answered_phrase_ends`): ``nod_delay_s`` plus a quarter of the nod cycle;
     * ``accent``: ``stroke_lead_s`` before each of the agent's accents (with a chance that grows
       with the accent's emphasis);
     * ``backchannel``: a quarter cycle after the start of each of the agent's own "mm-hm".
     """
-    from data_synth.nods import LISTENING_WINDOW_S
-
     motion = conversation.config.motion
     quarter_cycle = motion.nod_duration_s / conversation.style.speed / 4
     earliest, latest = (d + quarter_cycle for d in motion.nod_delay_s)
     agent = conversation.events.phrases_of("A", kind=None)
-    ends = [
-        p.end
-        for p in conversation.events.phrases_of("B")
-        if not any(u.start < p.end + LISTENING_WINDOW_S and u.end > p.end for u in agent)
-    ]
+    ends = answered_phrase_ends(conversation)
     accents = [a.time - motion.stroke_lead_s for a in conversation.events.accents_of("A")]
     backchannels = [u.start + quarter_cycle for u in agent if u.kind == "backchannel"]
     tolerance = NOD_TOLERANCE_S

@@ -11,7 +11,10 @@ windows: :mod:`gesturelib.models.control`):
 Every part is trained together. The flow works on ``latent_dim`` numbers instead of 54, which is
 why the paper's model is smaller and faster to train than MoGlow.
 
-:class:`FlowVAE` is the paper's model. Its loss (eq. 4) is
+:class:`FlowVAE` is the paper's model, and its config's defaults are the course's recipe, which
+differs from the paper in three settings explained below (``detach_prior``, ``residual`` and
+``leak``; the paper's: ``FlowVAEConfig(detach_prior=False, residual=False, leak=0)``). Its loss
+(eq. 4) is
 
     alpha * NLL(h) + MSE(x, d(h)) + MSE(x, d(h')),     h = e(x),  h' = f^-1(z'; c), z' ~ N(0, I)
 
@@ -64,6 +67,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 import torch.nn.functional as F
@@ -104,18 +108,22 @@ class LatentFlowConfig(ControlConfig):
         autoencoder_hidden: units of the encoder's and the decoder's hidden layer (the paper: 105).
         steps: Glow steps ``K`` of the flow (the paper: 8).
         hidden: units of each coupling's LSTM and of the control encoder (the paper: 400).
-        residual: the flow models ``h_t - e(x_{t-1})`` (needs ``past_poses >= 1``), not ``h_t``;
-            see the module docstring.
+        residual: the flow models ``h_t - e(x_{t-1})`` (needs ``past_poses >= 1``), not ``h_t``
+            as the paper does; see the module docstring.
         leak: with ``residual``, the fraction of the way from the last latent to the mean pose's
             that the change is measured from (0: none; see the module docstring).
     """
+
+    #: Fields added after runs were saved, with the value those runs were trained with, so that
+    #: their checkpoints load as they were trained (:func:`gesturelib.configs.config_from_dict`).
+    FIELDS_ADDED: ClassVar[dict] = {"leak": 0.0}
 
     latent_dim: int = 16
     autoencoder_hidden: int = 105
     steps: int = 4
     hidden: int = 64
-    residual: bool = False
-    leak: float = 0.0
+    residual: bool = True
+    leak: float = 0.02
 
     def __post_init__(self):
         super().__post_init__()
@@ -133,7 +141,10 @@ class LatentFlowConfig(ControlConfig):
         if self.residual and self.past_poses < 1:
             raise ValueError("residual=True needs the last pose in the control: past_poses >= 1")
         if self.leak and not self.residual:
-            raise ValueError("leak pulls the latent of a residual model: it needs residual=True")
+            raise ValueError(
+                "leak pulls the latent of a residual model: it needs residual=True "
+                "(for a model of the latent itself, set leak=0 too)"
+            )
 
     @classmethod
     def quick(cls, **changes):
@@ -152,13 +163,16 @@ class FlowVAEConfig(LatentFlowConfig):
             (the paper: 1; 0 leaves it out).
         latent_noise: standard deviation of the noise added to ``h`` (0: none, and the encoder
             can shrink its latent without end unless ``detach_prior``; see the module docstring).
-        detach_prior: the NLL trains the flow alone: its gradient does not reach the encoder.
+        detach_prior: the NLL trains the flow alone: its gradient does not reach the encoder
+            (the paper's does).
     """
+
+    FIELDS_ADDED: ClassVar[dict] = {"leak": 0.0, "detach_prior": False}
 
     alpha: float = 5e-4
     sample_weight: float = 1.0
-    latent_noise: float = 0.1
-    detach_prior: bool = False
+    latent_noise: float = 0.0
+    detach_prior: bool = True
 
     def __post_init__(self):
         super().__post_init__()
@@ -291,7 +305,7 @@ class FlowVAE(_LatentFlowModel):
         return self.encoder(pose)
 
     def loss(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """The paper's loss per frame (eq. 4), with noise on the latent (module docstring)."""
+        """The paper's loss per frame (eq. 4), with the remedies the config asks for (module docstring)."""
         config = self.config
         pose, control, generator = self._pose_and_control(batch)
         latent = noisy = self.encode(pose)

@@ -52,7 +52,10 @@ class MoGlowConfig(ControlConfig):
     """MoGlow's sizes (the paper: K = 16 steps, LSTMs of 800 units; here sized for a CPU).
 
     Attributes:
-        speech_past, speech_future, past_poses, style, control_size, dropout: the control
+        speech_past: frames of past speech and activity, 15 (0.6 s; the paper: 5): a listener's
+            nod comes up to half a second after the partner's phrase ends, which the control must
+            still show when the head moves.
+        speech_future, past_poses, style, control_size, dropout: the control
             (:class:`~gesturelib.models.control.ControlConfig`).
         steps: Glow steps ``K``.
         hidden: units of each coupling's LSTM, and of the control encoder's hidden layer.
@@ -62,6 +65,7 @@ class MoGlowConfig(ControlConfig):
             ``past_poses >= 1``); see the module docstring.
     """
 
+    speech_past: int = 15
     steps: int = 8
     hidden: int = 128
     pose_noise: float = 0.05
