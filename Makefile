@@ -33,8 +33,10 @@ demo: setup
 test: setup
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	GESTURELIB_QUICK=1 MPLBACKEND=Agg $(BIN)/python -m pytest tests notebooks \
-		--nbval-lax --nbval-current-env --nbval-cell-timeout=300
+	@# On every core: a notebook's cells stay together, in order, on one worker (loadscope);
+	@# the notebooks, the longest work, are handed out first.
+	GESTURELIB_QUICK=1 MPLBACKEND=Agg $(BIN)/python -m pytest notebooks tests \
+		--nbval-lax --nbval-current-env --nbval-cell-timeout=300 -n auto --dist loadscope
 
 ## make check-full: every notebook executed in full mode, its claims asserted (NB=04 for one);
 ## the executed copies, with their pictures, go to outputs/check-full/. Not part of CI (minutes).

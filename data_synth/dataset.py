@@ -46,6 +46,7 @@ from data_synth.conversation import (
     load_conversation,
     save_conversation,
 )
+from gesturelib.locks import exclusive
 
 SPLITS = ("train", "val", "test")
 MANIFEST_NAME = "manifest.json"
@@ -251,6 +252,15 @@ def ensure_dataset(
         ValueError: for bad sizes or seeds, or if ``out_dir`` is a file.
     """
     minutes, seed, conversation_s, config = _check_arguments(minutes, seed, conversation_s, config)
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    # Two notebooks (or test workers) asking at once: the first writes, the other waits and reuses.
+    with exclusive(out_dir.parent / f".{out_dir.name}.lock", wait_for=f"writing {out_dir}"):
+        return _ensure_dataset(out_dir, minutes, seed, conversation_s, config, progress)
+
+
+def _ensure_dataset(out_dir: Path, minutes, seed, conversation_s, config, progress) -> dict:
+    """:func:`ensure_dataset` with checked arguments, under the folder's lock."""
     # As a manifest reads back: tuples become lists.
     wanted = json.loads(json.dumps(_provenance(minutes, seed, conversation_s, config)))
     stale = False

@@ -38,6 +38,7 @@ import torch
 from torch import nn
 
 from gesturelib.configs import config_from_dict
+from gesturelib.locks import LockedError, exclusive
 from gesturelib.runtime import device_of
 
 # The version changes whenever a run of older code would load but compute nonsense: 4 is the
@@ -213,18 +214,6 @@ def load_model(path: str | Path, model_class: type[nn.Module], device: str = "cp
     return model.to(device).eval()
 
 
-def _lock(stream) -> None:
-    """An exclusive, non-blocking lock on an open file; OSError if another process holds one."""
-    if os.name == "nt":
-        import msvcrt
-
-        msvcrt.locking(stream.fileno(), msvcrt.LK_NBLCK, 1)
-    else:
-        import fcntl
-
-        fcntl.flock(stream.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-
-
 class RunFolder:
     """``last.pt`` and ``best.pt`` of one training run, identified by its model, configs and data.
 
@@ -250,27 +239,15 @@ class RunFolder:
         if self.folder.exists() and not self.folder.is_dir():
             raise CheckpointError(f"{self.folder} is a file, not a folder for checkpoints")
         self.folder.mkdir(parents=True, exist_ok=True)
-        path = self.folder / ".lock"
-        stream = open(path, "a+")  # noqa: SIM115 - held open for the whole run
-        try:
-            _lock(stream)
-        except OSError:
-            stream.seek(0)
-            holder = stream.read().strip() or "unknown"
-            stream.close()
-            raise CheckpointError(
-                f"another training run (process {holder}) is writing {self.folder}; wait for it "
-                "to end, or choose another folder"
-            ) from None
-        stream.seek(0)
-        stream.truncate()
-        stream.write(str(os.getpid()))
-        stream.flush()
-        try:
+        with contextlib.ExitStack() as held:
+            try:
+                held.enter_context(exclusive(self.folder / ".lock", remove=True))
+            except LockedError as error:
+                raise CheckpointError(
+                    f"another training run (process {error.holder}) is writing {self.folder}; wait for it to "
+                    "end, or choose another folder"
+                ) from None
             yield
-        finally:
-            path.unlink(missing_ok=True)
-            stream.close()  # closing releases the lock
 
     def claim(self, may_differ: Iterable[str], overwrite: bool) -> None:
         """Make sure the folder is this run's: delete its checkpoints if ``overwrite``, else check

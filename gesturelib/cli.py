@@ -11,6 +11,8 @@ Commands (``docs/architecture.md`` has the contract they share):
                               score runs and the references on held-out conversations:
                               metrics.csv, models.csv and figures
     info RUN                  what a run folder holds
+    import-bvh SRC --out DATA motion capture (NAME.bvh with NAME.wav) as a dataset that train
+                              and evaluate take
     demo                      a conversation no model has heard: its recorded motion beside the
                               shipped MoGlow's, rendered with the sound
 
@@ -48,12 +50,18 @@ def run_train(args) -> Path:
     and ``run.json``."""
     import torch
 
-    from data_synth import course_data, load_dataset
+    from data_synth import course_data
+    from gesturelib import distributed
     from gesturelib.checkpoints import FORMAT, VERSION
+    from gesturelib.datasets import load_dataset
     from gesturelib.pipeline import train_model
     from gesturelib.runtime import device, quick_mode
 
     quick = args.quick or quick_mode()
+    device(args.device)
+    # Under torchrun: join the other processes first; all check, then process 0 alone writes.
+    train_device = distributed.start_from_environment(args.device)
+    first = distributed.world()[0] == 0
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CommandError(f"--out {out} is a file, not a folder")
@@ -65,11 +73,11 @@ def run_train(args) -> Path:
         )
     if args.resume and not (out / "last.pt").exists():
         raise CommandError(f"{out} holds no run to resume (no last.pt)")
-    device(args.device)
     data = course_data(quick) if args.data is None else Path(args.data)
     splits = load_dataset(data)
     torch.set_num_threads(args.threads)
-    if args.overwrite:
+    distributed.barrier()  # every process has checked the folder before any writes to it
+    if args.overwrite and first:
         (out / "run.json").unlink(missing_ok=True)
 
     started = time.perf_counter()
@@ -78,10 +86,13 @@ def run_train(args) -> Path:
         splits,
         quick=quick,
         seed=args.seed,
-        train_changes={"device": args.device},
+        train_changes={"device": train_device},
         out=out,
         overwrite=args.overwrite,
+        progress=first,
     )
+    if not first:
+        return out
     summary = {
         "format": FORMAT,
         "version": VERSION,
@@ -221,7 +232,10 @@ def _render(motions, titles, audio, sample_rate: int, path: Path, views=("front"
 
 def run_info(args) -> str:
     """A description of a run folder."""
+    from gesturelib.datasets import dataset_format
     from gesturelib.history import History
+    from gesturelib.mocap.dataset import FORMAT as MOCAP_FORMAT
+    from gesturelib.mocap.dataset import read_manifest
     from gesturelib.pretrained import load_run, read_summary
 
     model, _, checkpoint = load_run(args.run)
@@ -239,6 +253,14 @@ def run_info(args) -> str:
         f"epoch {history.best_epoch} (validation loss {checkpoint['score']:.4g})",
         f"size on disk    {size / 1e6:.1f} MB",
     ]
+    data = summary.get("data")
+    if data is not None and dataset_format(data) == MOCAP_FORMAT:
+        manifest = read_manifest(data)
+        lines.insert(
+            5,
+            f"motion capture  imported from {manifest['source']} (rig {manifest['rig']}, units "
+            f"{', '.join(manifest['units'])}, on the course's skeleton)",
+        )
     return "\n".join(lines)
 
 
@@ -254,7 +276,7 @@ def run_evaluate(args) -> list[Path]:
     import torch
 
     matplotlib.use("Agg")
-    from data_synth import load_dataset
+    from gesturelib.datasets import load_dataset
     from gesturelib.evaluation import report
     from gesturelib.evaluation.fgd import feature_network
     from gesturelib.evaluation.table import evaluate_models
@@ -440,6 +462,27 @@ def run_demo(out: Path, seconds: float, seed: int, overwrite: bool = False) -> l
 
 
 # ---------------------------------------------------------------------------------------------
+# import-bvh
+# ---------------------------------------------------------------------------------------------
+
+
+def run_import(args) -> dict:
+    """Import the takes of ``args.src`` into the dataset folder ``args.out``; return its
+    manifest."""
+    from gesturelib.mocap.dataset import import_bvh
+
+    manifest = import_bvh(args.src, args.out, rig=args.rig, overwrite=args.overwrite)
+    counts = {split: len(entries) for split, entries in manifest["splits"].items()}
+    minutes = sum(e["duration_s"] for es in manifest["splits"].values() for e in es) / 60
+    print(
+        f"Imported {sum(counts.values())} takes ({minutes:.1f} min; rig {manifest['rig']}, "
+        f"units {', '.join(manifest['units'])}) into {args.out}/: "
+        + ", ".join(f"{n} {split}" for split, n in counts.items())
+    )
+    return manifest
+
+
+# ---------------------------------------------------------------------------------------------
 # the parser
 # ---------------------------------------------------------------------------------------------
 
@@ -460,6 +503,7 @@ def _at_least(minimum: int):
 
 
 def _parser() -> argparse.ArgumentParser:
+    from gesturelib.mocap.rigs import RIG_NAMES
     from gesturelib.recipes import RECIPES
 
     parser = OneLineParser(prog="gesturelib", description=__doc__.splitlines()[0])
@@ -528,6 +572,18 @@ def _parser() -> argparse.ArgumentParser:
     info = commands.add_parser("info", help="what a run folder holds")
     info.add_argument("run", type=Path)
 
+    imported = commands.add_parser(
+        "import-bvh", help="motion capture (NAME.bvh with NAME.wav) as a dataset"
+    )
+    imported.add_argument("src", type=Path, help="a folder of NAME.bvh, NAME.wav, NAME_partner.wav")
+    imported.add_argument("--out", required=True, type=Path, help="the dataset folder")
+    imported.add_argument(
+        "--rig", choices=RIG_NAMES, help="the skeleton's joint names (default: detected)"
+    )
+    imported.add_argument(
+        "--overwrite", action="store_true", help="replace a dataset imported there before"
+    )
+
     demo = commands.add_parser(
         "demo", help="a new conversation: its recorded motion and the shipped MoGlow's, rendered"
     )
@@ -562,6 +618,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"Wrote {len(files)} files to {args.out}/: " + ", ".join(f.name for f in files))
         elif args.command == "info":
             print(run_info(args))
+        elif args.command == "import-bvh":
+            run_import(args)
         else:
             seed = secrets.randbelow(10_000) if args.seed is None else args.seed
             files = run_demo(args.out, args.seconds, seed, args.overwrite)

@@ -281,6 +281,15 @@ def save_audio(
         raise OSError(f"cannot write {path}: {error} (is the disk full, or read-only?)") from error
 
 
+def mix_voices(agent: np.ndarray, partner: np.ndarray) -> np.ndarray:
+    """Both voices in one track ``(n,)``: their sum, scaled down only if it would clip (trimmed
+    to the shorter recording)."""
+    n = min(len(agent), len(partner))
+    both = agent[:n] + partner[:n]
+    peak = float(np.abs(both).max())
+    return both / peak if peak > 1.0 else both
+
+
 # --------------------------------------------------------------------------- frame alignment
 
 

@@ -24,7 +24,7 @@ import numpy as np
 from torch import nn
 
 from gesturelib.data import Normaliser, make_datasets
-from gesturelib.features import speech_features, who_is_talking
+from gesturelib.features import mix_voices, speech_features, who_is_talking
 from gesturelib.history import History
 from gesturelib.recipes import RECIPES
 from gesturelib.sampling import generate
@@ -187,7 +187,7 @@ def speech_to_motion(
     if activity is None:
         activity = who_is_talking(audio, sample_rate, partner)
     if partner is not None:
-        audio = _mix(audio, partner)
+        audio = mix_voices(audio, partner)
     rotations = generate(
         model,
         normaliser,
@@ -200,12 +200,3 @@ def speech_to_motion(
         progress=progress,
     )
     return Motion(rotations, forward_kinematics(rotations), activity, audio, sample_rate)
-
-
-def _mix(agent: np.ndarray, partner: np.ndarray) -> np.ndarray:
-    """Both voices in one track ``(n,)``: their sum, scaled down only if it would clip (trimmed
-    to the shorter recording)."""
-    n = min(len(agent), len(partner))
-    both = agent[:n] + partner[:n]
-    peak = float(np.abs(both).max())
-    return both / peak if peak > 1.0 else both

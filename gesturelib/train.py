@@ -38,9 +38,11 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
+from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from tqdm.auto import tqdm
 
+from gesturelib import distributed
 from gesturelib.checkpoints import (
     VERSION,
     RunFolder,
@@ -55,6 +57,7 @@ from gesturelib.checkpoints import (
 )
 from gesturelib.configs import check_fields, config_from_dict, config_to_dict
 from gesturelib.history import History
+from gesturelib.locks import exclusive
 from gesturelib.runtime import device, device_of
 
 #: Training-config fields that change how a run executes, not what it computes.
@@ -200,6 +203,8 @@ def train(
         return _fit(model, train_data, val_data, config, None, normaliser, progress, target)
     fingerprint = data_fingerprint or dataset_fingerprint(train_data, val_data)
     folder = RunFolder(checkpoint_dir, _identity(model, config, fingerprint))
+    if distributed.world()[0] > 0:  # under torchrun: process 0 claims the folder and writes it
+        return _fit(model, train_data, val_data, config, folder, normaliser, progress, target)
     with folder.writing():  # one training run at a time in a folder
         folder.claim(RESUMABLE_FIELDS, overwrite)
         return _fit(model, train_data, val_data, config, folder, normaliser, progress, target)
@@ -209,16 +214,27 @@ def _fit(model, train_data, val_data, config, folder, normaliser, progress, targ
     """The loop of :func:`train`, its inputs checked and its folder (or None) claimed."""
     was_training = model.training
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr_max)
+    rank, size = distributed.world()
     # A random stream of our own, seeded: training neither depends on nor disturbs the caller's.
     with torch.random.fork_rng(devices=[target.index or 0] if target.type == "cuda" else []):
         torch.manual_seed(config.seed)
-        run = _Run(model, optimizer, folder, normaliser)
+        if rank == 0:  # writes the initial state when starting, so the others can read it
+            run = _Run(model, optimizer, folder, normaliser, writes=True)
+        distributed.barrier()
+        if rank > 0:
+            run = _Run(model, optimizer, folder, normaliser, writes=False)
+        compute = model.loss
+        if size > 1:  # each process its own draws (dropout, noise), from the seed and the step
+            torch.manual_seed(
+                int(np.random.SeedSequence([config.seed, rank, run.step]).generate_state(1)[0])
+            )
+            compute = DistributedDataParallel(distributed.LossOf(model))
         epochs_before = run.epoch
         total = len(_batches(train_data, config, 1)) * config.epochs
         bar = tqdm(
             total=total,
             initial=min(run.step, total),
-            disable=not progress,
+            disable=not progress or rank > 0,
             desc=f"training {type(model).__name__}",
         )
         try:
@@ -235,7 +251,7 @@ def _fit(model, train_data, val_data, config, folder, normaliser, progress, targ
                         )
                         where = f"epoch {epoch}, batch {number} (optimiser step {run.step + 1})"
                         values = _update(
-                            model, optimizer, batch, rate, config.grad_clip_norm, where
+                            model, compute, optimizer, batch, rate, config.grad_clip_norm, where
                         )
                         _accumulate(sums, values, _batch_size(batch))
                         run.step += 1
@@ -246,6 +262,7 @@ def _fit(model, train_data, val_data, config, folder, normaliser, progress, targ
                         where = f"the validation of epoch {epoch}"
                         raise NonFiniteLossError(_message("validation loss", val, where))
                     seconds = time.perf_counter() - started
+                    sums = distributed.all_sum(sums)  # every process's share of the epoch
                     run.end_epoch(epoch, _means(sums), val, rate, seconds, config.patience)
         except BaseException as error:
             if folder is not None and not isinstance(error, NonFiniteLossError):
@@ -266,13 +283,12 @@ class _Run:
     """One call of :func:`train`: where the run stands (epochs and steps done, history, best
     weights so far) and how it is saved (its folder, optimiser and normaliser)."""
 
-    def __init__(self, model: nn.Module, optimizer, folder: RunFolder | None, normaliser):
-        self.model, self.optimizer, self.folder, self.normaliser = (
-            model,
-            optimizer,
-            folder,
-            normaliser,
-        )
+    def __init__(
+        self, model: nn.Module, optimizer, folder: RunFolder | None, normaliser, writes: bool
+    ):
+        self.model, self.optimizer, self.normaliser = model, optimizer, normaliser
+        self.folder = folder
+        self.writes = writes and folder is not None  # one process writes the run folder
         self.epoch = self.saved_epoch = self.step = 0
         self.history, self.best_score, self.best_weights = History(), math.inf, None
         if folder is None:
@@ -305,7 +321,7 @@ class _Run:
         self.save_last()
 
     def save_last(self) -> None:
-        if self.folder is None:
+        if not self.writes:
             return
         best_is_current = self.history.best_epoch == self.epoch  # then it need not be stored twice
         self.folder.save(
@@ -324,7 +340,7 @@ class _Run:
         self.saved_epoch = self.epoch
 
     def save_best(self) -> None:
-        if self.folder is None:
+        if not self.writes:
             return
         weights = self.best_weights if self.best_weights is not None else _cpu_copy(self.model)
         self.folder.save(
@@ -340,12 +356,13 @@ class _Run:
         )
 
 
-def _update(model, optimizer, batch, rate: float, grad_clip_norm, where: str) -> dict:
-    """One optimiser step at learning rate ``rate``, unless the loss or gradient is not finite."""
+def _update(model, compute, optimizer, batch, rate: float, grad_clip_norm, where: str) -> dict:
+    """One optimiser step at learning rate ``rate``, unless the loss or gradient is not finite;
+    ``compute(batch)`` is ``model.loss`` or, in several processes, its distributed wrapper."""
     for group in optimizer.param_groups:
         group["lr"] = rate
     optimizer.zero_grad(set_to_none=True)
-    terms = _loss_terms(model, batch)
+    terms = _loss_terms(model, batch, compute)
     values = {key: float(value.detach()) for key, value in terms.items()}
     if not math.isfinite(values["loss"]):
         raise NonFiniteLossError(_message("loss", values, where, before_update=True))
@@ -388,13 +405,26 @@ def evaluate(model: nn.Module, data, batch_size: int = 64) -> dict[str, float]:
 def _batches(data, config: TrainConfig, epoch: int) -> DataLoader:
     """The epoch's shuffled batches; the order depends on (seed, epoch) alone."""
     seed = int(np.random.SeedSequence([config.seed, epoch]).generate_state(1)[0])
+    generator = torch.Generator().manual_seed(seed)
+    rank, size = distributed.world()
+    if size > 1:  # the same order in every process, each its share of every batch
+        shards = distributed.ShardedBatches(
+            len(data), config.batch_size, config.drop_last, generator, rank, size
+        )
+        return DataLoader(
+            data,
+            batch_sampler=shards,
+            num_workers=config.num_workers,
+            generator=generator,  # which draws a seed first, as the shuffling loader below does
+            pin_memory=config.device.startswith("cuda"),
+        )
     return DataLoader(
         data,
         batch_size=config.batch_size,
         shuffle=True,
         drop_last=config.drop_last,
         num_workers=config.num_workers,
-        generator=torch.Generator().manual_seed(seed),
+        generator=generator,
         pin_memory=config.device.startswith("cuda"),
     )
 
@@ -426,9 +456,10 @@ def _cpu_copy(model: nn.Module) -> dict:
     return {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
 
 
-def _loss_terms(model: nn.Module, batch: dict) -> dict[str, torch.Tensor]:
-    """``model.loss(batch)``, checked: a dict with ``"loss"``, of scalar tensors."""
-    terms, name = model.loss(batch), type(model).__name__
+def _loss_terms(model: nn.Module, batch: dict, compute=None) -> dict[str, torch.Tensor]:
+    """``model.loss(batch)`` (or ``compute(batch)``), checked: a dict with ``"loss"``, of scalar
+    tensors."""
+    terms, name = (compute or model.loss)(batch), type(model).__name__
     if not isinstance(terms, dict) or "loss" not in terms:
         got = sorted(terms) if isinstance(terms, dict) else type(terms).__name__
         raise TypeError(f"{name}.loss(batch) must return a dict with the key 'loss', got {got}")
@@ -525,26 +556,30 @@ def load_or_train(
         }
     )
     folder = Path(cache_dir) / f"{model_class.__name__}-{key}"
-    best = RunFolder(folder, identity).best
-    if best.exists():
-        checkpoint = read_checkpoint(best, kind="best")
-        RunFolder(folder, identity).check(
-            checkpoint, best, EXECUTION_FIELDS, advice="Delete it to retrain."
+    folder.mkdir(parents=True, exist_ok=True)
+    # Another process asking for the same model at once (a second notebook, a test worker)
+    # waits for the first to train it, then loads it.
+    with exclusive(folder / ".cache.lock", wait_for=f"training {folder}"):
+        best = RunFolder(folder, identity).best
+        if best.exists():
+            checkpoint = read_checkpoint(best, kind="best")
+            RunFolder(folder, identity).check(
+                checkpoint, best, EXECUTION_FIELDS, advice="Delete it to retrain."
+            )
+            history = History.from_dict(checkpoint["history"])
+            if history.stopped_early or checkpoint["epochs_done"] >= train_config.epochs:
+                load_state(model, checkpoint["model"], best)
+                if progress:
+                    print(f"Loaded {best} (epoch {history.best_epoch} of {history.epochs})")
+                return model.to(device(train_config.device)).eval(), history
+        history = train(
+            model,
+            train_data,
+            val_data,
+            train_config,
+            folder,
+            normaliser=normaliser,
+            progress=progress,
+            data_fingerprint=fingerprint,
         )
-        history = History.from_dict(checkpoint["history"])
-        if history.stopped_early or checkpoint["epochs_done"] >= train_config.epochs:
-            load_state(model, checkpoint["model"], best)
-            if progress:
-                print(f"Loaded {best} (epoch {history.best_epoch} of {history.epochs})")
-            return model.to(device(train_config.device)).eval(), history
-    history = train(
-        model,
-        train_data,
-        val_data,
-        train_config,
-        folder,
-        normaliser=normaliser,
-        progress=progress,
-        data_fingerprint=fingerprint,
-    )
-    return model.eval(), history
+        return model.eval(), history

@@ -19,6 +19,7 @@ from gesturelib.checkpoints import (
 from gesturelib.configs import config_from_dict
 from gesturelib.data import Normaliser
 from gesturelib.train import (
+    _TRAINING_CODE,
     History,
     NonFiniteLossError,
     TrainConfig,
@@ -566,6 +567,33 @@ def test_load_or_train_trains_once_then_loads(tmp_path):
     assert Counting.calls == 0 and len(list(tmp_path.iterdir())) == 1
 
 
+def test_two_processes_asking_for_one_model_train_it_once(tmp_path, capsys):
+    """The second waits for the first (here: threads, whose file locks conflict as processes'
+    do) and then loads what it trained."""
+    import threading
+
+    # ast.parse is not thread-safe in CPython 3.11: the code's fingerprint is parsed here first
+    # (processes, which the threads stand for, each parse their own).
+    checkpoints.code_fingerprint(*_TRAINING_CODE, Counting.__module__)
+    Counting.calls = 0
+    results = []
+
+    def ask():
+        results.append(
+            load_or_train(Counting, ToyConfig(), TRAIN, VAL, config(), tmp_path, progress=True)
+        )
+
+    askers = [threading.Thread(target=ask) for _ in range(2)]
+    for asker in askers:
+        asker.start()
+    for asker in askers:
+        asker.join(timeout=60)
+    assert Counting.calls == 4 * (4 + 2)  # trained once
+    (first, _), (second, _) = results
+    assert_same_weights(weights(first), weights(second))
+    assert "Loaded" in capsys.readouterr().out
+
+
 def test_load_or_train_distinguishes_configs_and_data(tmp_path):
     Counting.calls = 0
     runs = [
@@ -731,3 +759,95 @@ def test_the_code_fingerprint_ignores_docstrings_and_sees_code(tmp_path, monkeyp
     assert fingerprint(helper=helper.replace("return 2", "return 3")) != base
     assert fingerprint(root="gesturelib.other") != base
     checkpoints.code_fingerprint.cache_clear()
+
+
+# ---------------------------------------------------------------------------------------------
+# Several processes (torchrun, gloo on CPUs)
+# ---------------------------------------------------------------------------------------------
+
+DISTRIBUTED_SCRIPT = """
+import sys
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from gesturelib.distributed import start_from_environment, world
+from gesturelib.train import TrainConfig, train
+
+
+@dataclass(frozen=True)
+class Config:
+    hidden: int = 8
+
+
+class Regressor(nn.Module):
+    config_class = Config
+
+    def __init__(self, config):
+        super().__init__()
+        self.config = config
+        self.net = nn.Sequential(nn.Linear(3, config.hidden), nn.Tanh(), nn.Linear(config.hidden, 1))
+
+    def loss(self, batch):
+        return {"loss": (self.net(batch["x"]).squeeze(-1) - batch["y"]).pow(2).mean()}
+
+
+def data(n, seed):
+    generator = torch.Generator().manual_seed(seed)
+    x = torch.randn(n, 3, generator=generator)
+    y = x @ torch.tensor([1.5, -2.0, 0.5]) + 0.1 * torch.randn(n, generator=generator)
+    return [{"x": x[i], "y": y[i]} for i in range(n)]
+
+
+folder, epochs = sys.argv[1], int(sys.argv[2])
+start_from_environment("cpu")
+torch.manual_seed(0)
+model = Regressor(Config())
+config = TrainConfig(epochs=epochs, batch_size=16, warmup_steps=8, lr_max=0.05, lr_min=0.005)
+history = train(model, data(64, 1), data(32, 2), config, folder, progress=False)
+if world()[0] == 0:
+    torch.save({"weights": model.state_dict(), "train": history.train}, folder + "/result.pt")
+"""
+
+
+def run_two_processes(script, *arguments):
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2"]
+    done = subprocess.run(
+        [*command, "--standalone", str(script), *map(str, arguments)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+
+
+def test_two_processes_train_as_one_process_on_the_same_global_batch(tmp_path):
+    """Each process takes half of every batch, the gradients are averaged: the weights and the
+    losses are one process's, to float rounding, also for a run resumed in two processes;
+    process 0 alone writes the run folder."""
+    script = tmp_path / "train_two.py"
+    script.write_text(DISTRIBUTED_SCRIPT)
+    run_two_processes(script, tmp_path / "two", 2)
+    run_two_processes(script, tmp_path / "two", 4)  # resumes from epoch 2
+    together = torch.load(tmp_path / "two" / "result.pt", weights_only=False)
+
+    namespace = {}
+    exec(DISTRIBUTED_SCRIPT.split("folder, epochs")[0], namespace)  # the model and data alone
+    torch.manual_seed(0)
+    alone = namespace["Regressor"](namespace["Config"]())
+    settings = dict(epochs=4, batch_size=16, warmup_steps=8, lr_max=0.05, lr_min=0.005)
+    history = train(
+        alone,
+        namespace["data"](64, 1),
+        namespace["data"](32, 2),
+        TrainConfig(**settings),
+        progress=False,
+    )
+    for key, value in alone.state_dict().items():
+        torch.testing.assert_close(together["weights"][key], value, rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(together["train"]["loss"], history.train["loss"], rtol=1e-5)
+    assert {p.name for p in (tmp_path / "two").iterdir()} == {"best.pt", "last.pt", "result.pt"}

@@ -105,7 +105,8 @@ def reference_motions(
 
     * ``floor``: the generator's motion drawn again for the same speech
       (``data_synth.resample_motion``): as natural and as appropriate as motion can be, yet not
-      the recorded one; no model can be expected to beat it;
+      the recorded one; no model can be expected to beat it. Only for the generator's
+      conversations: recorded data (imported motion capture) has none;
     * ``mismatched``: the recorded motion of another conversation (cut or repeated to length):
       natural, but for other speech;
     * ``mean_pose``: ``mean_pose`` ``(9, 3)`` held still.
@@ -129,8 +130,12 @@ def reference_motions(
     if mean_pose.shape != (9, 3):
         raise ValueError(f"mean_pose must be keypoints (9, 3), got {mean_pose.shape}")
     lengths = [len(c.positions) for c in conversations]
-    return {
-        "floor": [resample_motion(c, seed + i).positions for i, c in enumerate(conversations)],
+    references = {}
+    if all(getattr(c, "events", None) is not None for c in conversations):  # the generator's
+        references["floor"] = [
+            resample_motion(c, seed + i).positions for i, c in enumerate(conversations)
+        ]
+    return references | {
         "mismatched": [
             np.resize(o.positions, (n, 9, 3))
             for o, n in zip(others[: len(lengths)], lengths, strict=True)

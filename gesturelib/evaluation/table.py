@@ -11,7 +11,7 @@ The references (:func:`reference_draws`), on the same conversations:
 
 * ``ground_truth``: the recorded motion (the target values of measures that are not distances);
 * ``floor``: motion drawn again by the generator for the same speech: as natural and as
-  appropriate as motion can be without being the recorded one;
+  appropriate as motion can be without being the recorded one (the generator's data only);
 * ``mismatched``: recorded motion of other conversations: natural, but for other speech;
 * ``mean_pose``: the training data's mean pose, held still.
 
@@ -176,9 +176,10 @@ def reference_draws(
         )
         for k in range(samples)
     ]
-    return {
-        "ground_truth": [[[c.positions for c in conversations]]],
-        "floor": [[d["floor"] for d in draws]],
+    references = {"ground_truth": [[[c.positions for c in conversations]]]}
+    if "floor" in draws[0]:  # the generator's data
+        references["floor"] = [[d["floor"] for d in draws]]
+    return references | {
         "mismatched": [[d["mismatched"] for d in draws]],
         "mean_pose": [[draws[0]["mean_pose"]]],
     }

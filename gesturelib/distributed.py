@@ -1,0 +1,93 @@
+"""Training in several processes, started by ``torchrun``: who this process is, which part of
+each batch it computes, and the sums they share.
+
+``torchrun --nproc_per_node=N -m gesturelib train MODEL ...`` starts N copies of the command;
+:func:`start_from_environment` joins them into one process group (gloo on CPUs, NCCL on GPUs).
+The training loop (:mod:`gesturelib.train`) then runs as one run on N processes: every process
+draws the same shuffled order and takes its share of each batch (:class:`ShardedBatches`), the
+gradients are averaged over processes (PyTorch's ``DistributedDataParallel``), so each optimiser
+step sees the same global batch as one process would; process 0 alone writes checkpoints and
+shows progress. Without ``torchrun`` nothing here does anything.
+"""
+
+from __future__ import annotations
+
+import os
+
+import torch
+import torch.distributed as dist
+from torch import nn
+from torch.utils.data import Sampler
+
+
+def world() -> tuple[int, int]:
+    """``(rank, size)``: this process's number and how many train together; ``(0, 1)`` alone."""
+    if dist.is_available() and dist.is_initialized():
+        return dist.get_rank(), dist.get_world_size()
+    return 0, 1
+
+
+def start_from_environment(device: str) -> str:
+    """Join the process group that ``torchrun`` describes in the environment (``WORLD_SIZE``,
+    ``RANK``, ``LOCAL_RANK``), if any; return the device this process trains on: ``device``,
+    or for ``cuda`` the GPU of this process's local rank."""
+    if int(os.environ.get("WORLD_SIZE", "1")) <= 1 or world()[1] > 1:
+        return device
+    cuda = device.startswith("cuda")
+    dist.init_process_group(backend="nccl" if cuda else "gloo")
+    if cuda:
+        local = int(os.environ.get("LOCAL_RANK", "0"))
+        torch.cuda.set_device(local)
+        return f"cuda:{local}"
+    return device
+
+
+def barrier() -> None:
+    """Wait for every process (nothing alone)."""
+    if world()[1] > 1:
+        dist.barrier()
+
+
+def all_sum(sums: dict[str, tuple[float, int]]) -> dict[str, tuple[float, int]]:
+    """``{key: (total, count)}`` summed over processes (the same keys in each)."""
+    if world()[1] == 1:
+        return sums
+    keys = sorted(sums)
+    values = torch.tensor([v for key in keys for v in sums[key]], dtype=torch.float64)
+    dist.all_reduce(values)
+    return {key: (float(values[2 * i]), int(values[2 * i + 1])) for i, key in enumerate(keys)}
+
+
+class ShardedBatches(Sampler):
+    """The batches of one epoch, each cut into this process's share: the order is
+    ``torch.randperm(n, generator)`` (as a shuffling ``DataLoader`` draws it), cut into batches of
+    ``batch_size``, and process ``rank`` of ``size`` takes every ``size``-th item of each, so the
+    processes together see the batches one process would. A last batch too small to give every
+    process an item is dropped (a process without items would wait for the others' gradients)."""
+
+    def __init__(self, n: int, batch_size: int, drop_last: bool, generator, rank: int, size: int):
+        assert batch_size >= size, "each process needs at least one item of every batch"
+        self.n, self.batch_size, self.generator = n, batch_size, generator
+        self.rank, self.size = rank, size
+        last = n % batch_size
+        self.batches = n // batch_size + (1 if last >= size and not drop_last else 0)
+
+    def __iter__(self):
+        order = torch.randperm(self.n, generator=self.generator).tolist()
+        for start in range(0, self.batches * self.batch_size, self.batch_size):
+            yield order[start : start + self.batch_size][self.rank :: self.size]
+
+    def __len__(self) -> int:
+        return self.batches
+
+
+class LossOf(nn.Module):
+    """``model.loss`` as a module's ``forward``: ``DistributedDataParallel`` averages the
+    gradients of what its wrapped module's forward computes."""
+
+    def __init__(self, model: nn.Module):
+        super().__init__()
+        self.model = model
+
+    def forward(self, batch: dict) -> dict:
+        return self.model.loss(batch)

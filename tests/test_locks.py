@@ -1,0 +1,44 @@
+"""gesturelib.locks, and the shared caches that wait for each other instead of failing."""
+
+import os
+import threading
+import time
+
+import pytest
+
+from gesturelib.locks import LockedError, exclusive
+
+
+def test_a_held_lock_is_refused_naming_its_holder_or_waited_for(tmp_path, capsys):
+    path = tmp_path / "lock"
+    order = []
+
+    def second():
+        with exclusive(path, wait_for="filling the cache"):
+            order.append("second")
+
+    with exclusive(path):
+        with pytest.raises(LockedError, match=f"process {os.getpid()} holds") as refused:
+            with exclusive(path):
+                pass
+        assert refused.value.holder == str(os.getpid())
+        waiter = threading.Thread(target=second)
+        waiter.start()
+        time.sleep(0.3)
+        order.append("first")  # the waiter has not got in meanwhile
+    waiter.join(timeout=10)
+    assert order == ["first", "second"]
+    assert (
+        f"Waiting for process {os.getpid()}, which is filling the cache" in capsys.readouterr().out
+    )
+    assert path.exists()  # kept: a waiter may be about to lock it
+
+
+def test_a_removable_lock_is_gone_after_release_also_after_an_error(tmp_path):
+    path = tmp_path / "lock"
+    with pytest.raises(KeyError):
+        with exclusive(path, remove=True):
+            raise KeyError("the work failed")
+    assert not path.exists()
+    with exclusive(path):  # free again
+        pass
