@@ -6,9 +6,10 @@ changes from each seed through the load-or-train cache (``checkpoints/``: the ch
 ``make results``' runs are reused), draws 3 samples per held-out conversation, and prints per seed
 and as mean ± sd over seeds: the wrist-speed Hellinger distance, wrist jerk, FGD, the
 speaking/listening ratio, the stroke lead, the accents hit, the listener's nods and their
-precision, the 99th percentile of the head's downward pitch speed, the drift (limb-angle error
-in the last 10 s of each held-out minute over the first 10 s), the parameters and the training
-minutes.
+precision, the 99th percentile of the head's downward pitch speed, the drift
+(:func:`gesturelib.evaluation.headline.drift`: the limb-angle error to the truth in the last
+10 s of the held-out conversations over the first 10 s, averaged over the samples first), the
+parameters and the training minutes.
 
 Usage (``make benchmark`` runs it without arguments: the Flow-VAE's recipe, seeds 0-2)::
 
@@ -30,9 +31,9 @@ import torch
 from data_synth import course_data, load_dataset
 from gesturelib.conventions import FPS
 from gesturelib.evaluation.fgd import feature_network
+from gesturelib.evaluation.headline import drift
 from gesturelib.evaluation.rules import head_pitch
 from gesturelib.evaluation.table import score_draw
-from gesturelib.gaps import limb_angle_error
 from gesturelib.pipeline import speech_to_motion, train_model
 from gesturelib.recipes import RECIPES
 from gesturelib.skeleton import forward_kinematics
@@ -72,19 +73,6 @@ def head_speed(motions: list) -> float:
     return float(np.percentile(np.concatenate(speeds), 99))
 
 
-def drift(rotations: list, conversations) -> float:
-    """Limb-angle error to the truth in the last 10 s of each conversation over the first 10 s
-    (1: no drift), one sample's ``rotations[i]`` ``(T, 9, 6)``."""
-    chunk = 10 * FPS
-    errors = [
-        limb_angle_error(r, c.rotations).mean(axis=1)
-        for r, c in zip(rotations, conversations, strict=True)
-    ]
-    first = np.mean([e[:chunk].mean() for e in errors])
-    last = np.mean([e[-chunk:].mean() for e in errors])
-    return float(last / first)
-
-
 def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:
     """The measures of one trained model, averaged over ``samples`` draws; ``save``: a file to
     write the draws' keypoints to (``sample<k>_conversation<i>``, ``(T, 9, 3)``)."""
@@ -104,16 +92,16 @@ def score(trained, test, features, samples: int, temperature: float | None, save
     ]
     draws, saved = [], {}
     for k in range(samples):
-        rotations = [r[k] for r in per_conversation]
-        motions = [forward_kinematics(r) for r in rotations]
+        motions = [forward_kinematics(r[k]) for r in per_conversation]
         row = score_draw(test, motions, features)
-        row["drift"] = drift(rotations, test)
         row["head_speed"] = head_speed(motions)
         draws.append(row)
         saved |= {f"sample{k}_conversation{i}": m for i, m in enumerate(motions)}
     if save is not None:
         np.savez_compressed(save, **saved)
-    row = {key: float(np.mean([d[key] for d in draws])) for key in COLUMNS if key != "minutes"}
+    per_draw = [key for key in COLUMNS if key not in ("drift", "minutes")]
+    row = {key: float(np.mean([d[key] for d in draws])) for key in per_draw}
+    row["drift"] = drift([[r[k] for r in per_conversation] for k in range(samples)], test)
     row["minutes"] = sum(trained.history.epoch_seconds) / 60
     return row
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from gesturelib.conventions import Activity
+from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation import (
     WRIST_SPEED_BINS,
     speaking_listening_ratio,
@@ -77,3 +77,31 @@ def test_the_references_rank_as_they_must_on_the_headline_measures():
         reference_motions(conversations[:1], mean_pose)
     alone = reference_motions(conversations[:1], mean_pose, others=conversations[1:])
     np.testing.assert_array_equal(alone["mismatched"][0], conversations[1].positions)
+
+
+def test_drift_measures_an_error_that_grows_by_a_known_amount():
+    """Every limb turned away from the truth by 2 + 0.1 t degrees (t in seconds): the error per
+    10 s is the mean of that line over each chunk, and the drift their last over their first."""
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    from gesturelib.evaluation.headline import drift, error_over_time
+    from gesturelib.rotations import matrix_to_rot6d
+    from gesturelib.skeleton import T_POSE_OFFSETS
+
+    frames = 60 * FPS
+    seconds = np.arange(frames) / FPS
+    angle = 2.0 + 0.1 * seconds
+    truth = np.tile(np.array([1.0, 0, 0, 0, 1, 0]), (frames, 9, 1))  # the T-pose
+    turned = np.empty_like(truth)
+    for limb, offset in enumerate(T_POSE_OFFSETS):
+        axis = np.cross(offset, [0.0, 0.0, 1.0])
+        axis = axis if np.linalg.norm(axis) > 1e-6 else np.cross(offset, [1.0, 0.0, 0.0])
+        axis /= np.linalg.norm(axis)
+        matrices = Rotation.from_rotvec(np.radians(angle)[:, None] * axis).as_matrix()
+        turned[:, limb] = matrix_to_rot6d(matrices)
+    conversation = SimpleNamespace(rotations=truth)
+    expected = 2.0 + 0.1 * (np.arange(6) * 10 + (10 - 1 / FPS) / 2)  # each chunk's mean angle
+    np.testing.assert_allclose(error_over_time([turned], [conversation]), expected, atol=1e-3)
+    assert drift([[turned], [turned]], [conversation]) == pytest.approx(expected[-1] / expected[0])

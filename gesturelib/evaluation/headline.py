@@ -11,6 +11,10 @@ them (``docs/architecture.md`` states the contract):
 * :func:`stroke_lead`: by how much the wrists' speed leads the emphasis of the agent's speech,
   measured from the audio (``data_synth.measure_stroke_lead``); the generator's strokes lead
   their accents by ``stroke_lead_s`` = 0.2 s.
+* :func:`error_over_time` and :func:`drift`: whether generated motion wanders off as a
+  conversation goes on: its limb-angle error to the recorded motion per 10 s, and how much larger
+  it is at the end than at the start. One sample's drift varies much from draw to draw: average
+  it over samples.
 """
 
 from __future__ import annotations
@@ -156,6 +160,47 @@ def generate_for(conversations, model, normaliser, **options) -> list[np.ndarray
         ).positions
         for c in conversations
     ]
+
+
+#: Seconds of each chunk of :func:`error_over_time`.
+DRIFT_CHUNK_S = 10.0
+
+
+def error_over_time(
+    rotations: Sequence[np.ndarray], conversations, chunk_s: float = DRIFT_CHUNK_S, fps: int = FPS
+) -> np.ndarray:
+    """The mean limb-angle error (degrees) of generated rotations to the recorded ones, per whole
+    chunk of ``chunk_s`` seconds from the start, averaged over conversations: ``(chunks,)``,
+    as many chunks as the shortest conversation holds.
+
+    Args:
+        rotations: one ``(T, 9, 6)`` per conversation (e.g. one sample each).
+        conversations: the held-out conversations (their ``rotations``).
+    """
+    from gesturelib.gaps import limb_angle_error
+
+    chunk = int(round(chunk_s * fps))
+    count = min(len(c.rotations) for c in conversations) // chunk
+    if count < 1:
+        raise ValueError(f"conversations shorter than one chunk of {chunk_s} s")
+    curves = [
+        limb_angle_error(r, c.rotations).mean(axis=1)[: count * chunk].reshape(count, chunk).mean(1)
+        for r, c in zip(rotations, conversations, strict=True)
+    ]
+    return np.mean(curves, axis=0)
+
+
+def drift(
+    samples: Sequence[Sequence[np.ndarray]], conversations, chunk_s: float = DRIFT_CHUNK_S
+) -> float:
+    """How much a model's motion wanders off: :func:`error_over_time` in the last chunk over the
+    first (1: an error that does not grow), the curve averaged over ``samples`` first.
+
+    Args:
+        samples: ``samples[k][i]``, rotations ``(T, 9, 6)`` of draw ``k`` for conversation ``i``.
+    """
+    curve = np.mean([error_over_time(draw, conversations, chunk_s) for draw in samples], axis=0)
+    return float(curve[-1] / curve[0])
 
 
 def headline_measures(conversations, motions: Sequence[np.ndarray]) -> dict[str, float]:
