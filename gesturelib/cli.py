@@ -91,6 +91,7 @@ def run_train(args) -> Path:
         overwrite=args.overwrite,
         progress=first,
     )
+    distributed.finish()
     if not first:
         return out
     summary = {
@@ -258,7 +259,7 @@ def run_info(args) -> str:
         manifest = read_manifest(data)
         lines.insert(
             5,
-            f"motion capture  imported from {manifest['source']} (rig {manifest['rig']}, units "
+            f"motion capture  imported from {manifest['source']} (rig {', '.join(manifest['rig'])}, units "
             f"{', '.join(manifest['units'])}, on the course's skeleton)",
         )
     return "\n".join(lines)
@@ -475,7 +476,7 @@ def run_import(args) -> dict:
     counts = {split: len(entries) for split, entries in manifest["splits"].items()}
     minutes = sum(e["duration_s"] for es in manifest["splits"].values() for e in es) / 60
     print(
-        f"Imported {sum(counts.values())} takes ({minutes:.1f} min; rig {manifest['rig']}, "
+        f"Imported {sum(counts.values())} takes ({minutes:.1f} min; rig {', '.join(manifest['rig'])}, "
         f"units {', '.join(manifest['units'])}) into {args.out}/: "
         + ", ".join(f"{n} {split}" for split, n in counts.items())
     )

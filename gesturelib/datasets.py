@@ -15,8 +15,10 @@ from pathlib import Path
 
 def dataset_format(folder: str | os.PathLike) -> str | None:
     """The ``format`` its manifest names, or None without a readable manifest."""
+    from gesturelib.mocap.dataset import MANIFEST_NAME
+
     try:
-        return json.loads((Path(folder) / "manifest.json").read_text()).get("format")
+        return json.loads((Path(folder) / MANIFEST_NAME).read_text()).get("format")
     except (OSError, ValueError, AttributeError):
         return None
 

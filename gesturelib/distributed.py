@@ -54,19 +54,41 @@ def all_sum(sums: dict[str, tuple[float, int]]) -> dict[str, tuple[float, int]]:
         return sums
     keys = sorted(sums)
     values = torch.tensor([v for key in keys for v in sums[key]], dtype=torch.float64)
+    if dist.get_backend() == "nccl":  # NCCL reduces GPU tensors only
+        values = values.to(torch.cuda.current_device())
     dist.all_reduce(values)
     return {key: (float(values[2 * i]), int(values[2 * i + 1])) for i, key in enumerate(keys)}
+
+
+def from_first(value):
+    """Process 0's ``value`` (any picklable object) in every process: one decision for all."""
+    if world()[1] == 1:
+        return value
+    shared = [value]
+    dist.broadcast_object_list(shared, src=0)
+    return shared[0]
+
+
+def finish() -> None:
+    """Leave the process group, if this process joined one."""
+    if world()[1] > 1:
+        dist.destroy_process_group()
 
 
 class ShardedBatches(Sampler):
     """The batches of one epoch, each cut into this process's share: the order is
     ``torch.randperm(n, generator)`` (as a shuffling ``DataLoader`` draws it), cut into batches of
-    ``batch_size``, and process ``rank`` of ``size`` takes every ``size``-th item of each, so the
-    processes together see the batches one process would. A last batch too small to give every
-    process an item is dropped (a process without items would wait for the others' gradients)."""
+    ``batch_size`` (a multiple of ``size``), and process ``rank`` of ``size`` takes every
+    ``size``-th item of each, so the processes together see the batches one process would. The
+    last, smaller batch is shared as evenly as it divides, and dropped if it cannot give every
+    process an item (a process without items would wait for the others' gradients)."""
 
     def __init__(self, n: int, batch_size: int, drop_last: bool, generator, rank: int, size: int):
-        assert batch_size >= size, "each process needs at least one item of every batch"
+        if batch_size % size:
+            raise ValueError(
+                f"a batch of {batch_size} does not divide among {size} processes; choose a "
+                "batch size that is a multiple of the number of processes"
+            )
         self.n, self.batch_size, self.generator = n, batch_size, generator
         self.rank, self.size = rank, size
         last = n % batch_size

@@ -224,6 +224,14 @@ def _fit(model, train_data, val_data, config, folder, normaliser, progress, targ
         if rank > 0:
             run = _Run(model, optimizer, folder, normaliser, writes=False)
         compute = model.loss
+        if size > 1 and run.step == 0:
+            # Layers that initialise from their first batch (ActNorm) see the batch one process
+            # would start from, in every process alike, not each process's share of it.
+            with torch.no_grad():
+                model.train()
+                model.loss(
+                    _to_device(next(iter(_batches(train_data, config, 1, shard=False))), target)
+                )
         if size > 1:  # each process its own draws (dropout, noise), from the seed and the step
             torch.manual_seed(
                 int(np.random.SeedSequence([config.seed, rank, run.step]).generate_state(1)[0])
@@ -258,6 +266,7 @@ def _fit(model, train_data, val_data, config, folder, normaliser, progress, targ
                         bar.update(1)
                         bar.set_postfix(epoch=epoch, loss=f"{values['loss']:.4g}", refresh=False)
                     val = evaluate(model, val_data, config.batch_size) if val_data else {}
+                    val = distributed.from_first(val)  # one choice of best epoch and stopping
                     if val and not math.isfinite(val["loss"]):
                         where = f"the validation of epoch {epoch}"
                         raise NonFiniteLossError(_message("validation loss", val, where))
@@ -402,12 +411,13 @@ def evaluate(model: nn.Module, data, batch_size: int = 64) -> dict[str, float]:
     return _means(sums)
 
 
-def _batches(data, config: TrainConfig, epoch: int) -> DataLoader:
-    """The epoch's shuffled batches; the order depends on (seed, epoch) alone."""
+def _batches(data, config: TrainConfig, epoch: int, shard: bool = True) -> DataLoader:
+    """The epoch's shuffled batches; the order depends on (seed, epoch) alone. In several
+    processes each takes its share of every batch, unless ``shard`` is False."""
     seed = int(np.random.SeedSequence([config.seed, epoch]).generate_state(1)[0])
     generator = torch.Generator().manual_seed(seed)
     rank, size = distributed.world()
-    if size > 1:  # the same order in every process, each its share of every batch
+    if size > 1 and shard:  # the same order in every process, each its share of every batch
         shards = distributed.ShardedBatches(
             len(data), config.batch_size, config.drop_last, generator, rank, size
         )

@@ -49,10 +49,13 @@ RIG = [
 REST_TURN = Rotation.from_euler("YX", [-120, 10], degrees=True).as_matrix()
 
 
-def write_rig_bvh(path, rotations, fps, prefix="", yaw_deg=(70.0, 90.0), shift=(0.3, -0.1)):
+def write_rig_bvh(
+    path, rotations, fps, prefix="", yaw_deg=(70.0, 90.0), shift=(0.3, -0.1), positions=False
+):
     """Our limb rotations ``(T, 9, 6)`` at 25 fps as a take of :data:`RIG` at ``fps``: in metres,
     the rest pose turned by :data:`REST_TURN`, the body walking ``shift`` metres and turning from
-    ``yaw_deg[0]`` to ``yaw_deg[1]`` degrees over the take."""
+    ``yaw_deg[0]`` to ``yaw_deg[1]`` degrees over the take; with ``positions``, every joint has
+    position channels (holding its offset), as some exporters write."""
     limbs = rot6d_to_matrix(np.asarray(rotations, dtype=np.float64))  # (T, 9, 3, 3)
     n = int(round(len(limbs) * fps / 25))
     times = np.minimum(np.arange(n) / fps, (len(limbs) - 1) / 25)
@@ -74,7 +77,7 @@ def write_rig_bvh(path, rotations, fps, prefix="", yaw_deg=(70.0, 90.0), shift=(
         written.append(name)
         pad = "\t" * depth
         channels = " ".join(f"{axis}rotation" for axis in order)
-        if parent is None:
+        if parent is None or positions:
             channels = f"6 Xposition Yposition Zposition {channels}"
         else:
             channels = f"3 {channels}"
@@ -99,8 +102,10 @@ def write_rig_bvh(path, rotations, fps, prefix="", yaw_deg=(70.0, 90.0), shift=(
     describe(0, 0)
     columns = [root]  # in the file's order: the hierarchy's, depth first
     for name in written:
-        _, parent, _, order, _ = RIG[[joint[0] for joint in RIG].index(name)]
+        _, parent, offset, order, _ = RIG[[joint[0] for joint in RIG].index(name)]
         local = world[name] if parent is None else np.swapaxes(world[parent], 1, 2) @ world[name]
+        if parent is not None and positions:
+            columns.append(np.tile(REST_TURN @ np.array(offset, dtype=float), (n, 1)))
         columns.append(Rotation.from_matrix(local).as_euler(order, degrees=True))
     motion = np.concatenate(columns, axis=1)
     lines += ["MOTION", f"Frames: {n}", f"Frame Time: {1 / fps:.8f}"]
@@ -159,6 +164,14 @@ def test_a_foreign_rig_in_metres_turning_and_walking_lands_on_our_skeleton(
         )
 
     assert np.abs(pitch(moved.positions) - pitch(conversation.positions))[25:-25].max() < 2.0
+
+
+def test_position_channels_on_every_joint_and_a_byte_order_mark_are_read(tmp_path, conversation):
+    path = write_rig_bvh(tmp_path / "take.bvh", conversation.rotations, fps=60, positions=True)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())  # a UTF-8 byte order mark
+    moved = retarget(read_bvh(path), conversation.num_frames)
+    error = np.linalg.norm(moved.positions - conversation.positions, axis=-1)[25:-25]
+    assert moved.units == "m" and np.median(error) < 0.3
 
 
 def test_our_own_export_reads_back_exactly(tmp_path, conversation):
@@ -236,7 +249,7 @@ def test_a_folder_of_takes_imports_trains_moglow_and_evaluates(tmp_path):
     conversations = make_takes(source, partner=True)
     assert main(["import-bvh", str(source), "--out", str(data)]) == 0
     manifest = json.loads((data / "manifest.json").read_text())
-    assert manifest["rig"] == "mixamo" and manifest["units"] == ["m"]
+    assert manifest["rig"] == ["mixamo"] and manifest["units"] == ["m"]
     splits = load_recordings(data)
     assert sorted(len(v) for v in splits.values()) == [1, 1, 1]
     by_name = {r.name: r for takes in splits.values() for r in takes}
@@ -280,6 +293,21 @@ def test_an_import_refuses_what_it_cannot_use_and_overwrites_only_when_asked(tmp
         import_bvh(source, data, progress=False)
     import_bvh(source, data, overwrite=True, progress=False)
     assert mine.read_text() == "my notes"
+    assert sorted(p.name for p in data.iterdir()) == [
+        "manifest.json",
+        "notes.txt",
+        "test",
+        "train",
+        "val",
+    ]
+    (data / "train" / "take9.npz").write_bytes(b"mine")  # a file of the user's beside the takes
+    generated = tmp_path / "generated"
+    from data_synth import write_dataset
+
+    write_dataset(generated, minutes=0.3, seed=0, conversation_s=6.0, progress=False)
+    with pytest.raises(FileExistsError, match="another dataset"):
+        import_bvh(source, generated, overwrite=True, progress=False)
+    assert (generated / "manifest.json").exists()
     (source / "take1.bvh").unlink()
     with pytest.raises(MocapError, match="at least 3"):
         import_bvh(source, tmp_path / "two", progress=False)

@@ -773,6 +773,7 @@ import torch
 from torch import nn
 
 from gesturelib.distributed import start_from_environment, world
+from gesturelib.flows import ActNorm
 from gesturelib.train import TrainConfig, train
 
 
@@ -787,10 +788,12 @@ class Regressor(nn.Module):
     def __init__(self, config):
         super().__init__()
         self.config = config
+        self.norm = ActNorm(3)  # initialised from the first batch it sees
         self.net = nn.Sequential(nn.Linear(3, config.hidden), nn.Tanh(), nn.Linear(config.hidden, 1))
 
     def loss(self, batch):
-        return {"loss": (self.net(batch["x"]).squeeze(-1) - batch["y"]).pow(2).mean()}
+        x, _ = self.norm(batch["x"])
+        return {"loss": (self.net(x).squeeze(-1) - batch["y"]).pow(2).mean()}
 
 
 def data(n, seed):
@@ -806,8 +809,7 @@ torch.manual_seed(0)
 model = Regressor(Config())
 config = TrainConfig(epochs=epochs, batch_size=16, warmup_steps=8, lr_max=0.05, lr_min=0.005)
 history = train(model, data(64, 1), data(32, 2), config, folder, progress=False)
-if world()[0] == 0:
-    torch.save({"weights": model.state_dict(), "train": history.train}, folder + "/result.pt")
+torch.save({"weights": model.state_dict(), "train": history.train}, f"{folder}/result{world()[0]}.pt")
 """
 
 
@@ -826,14 +828,14 @@ def run_two_processes(script, *arguments):
 
 
 def test_two_processes_train_as_one_process_on_the_same_global_batch(tmp_path):
-    """Each process takes half of every batch, the gradients are averaged: the weights and the
-    losses are one process's, to float rounding, also for a run resumed in two processes;
-    process 0 alone writes the run folder."""
+    """Each process takes half of every batch, the gradients are averaged, the ActNorm starts
+    from the whole first batch: the weights and the losses are one process's, to float rounding,
+    in both processes, also for a run resumed in two; process 0 alone writes the run folder."""
     script = tmp_path / "train_two.py"
     script.write_text(DISTRIBUTED_SCRIPT)
     run_two_processes(script, tmp_path / "two", 2)
     run_two_processes(script, tmp_path / "two", 4)  # resumes from epoch 2
-    together = torch.load(tmp_path / "two" / "result.pt", weights_only=False)
+    together, other = (torch.load(tmp_path / "two" / f"result{rank}.pt") for rank in (0, 1))
 
     namespace = {}
     exec(DISTRIBUTED_SCRIPT.split("folder, epochs")[0], namespace)  # the model and data alone
@@ -849,5 +851,7 @@ def test_two_processes_train_as_one_process_on_the_same_global_batch(tmp_path):
     )
     for key, value in alone.state_dict().items():
         torch.testing.assert_close(together["weights"][key], value, rtol=1e-4, atol=1e-5)
+        torch.testing.assert_close(other["weights"][key], together["weights"][key])
     np.testing.assert_allclose(together["train"]["loss"], history.train["loss"], rtol=1e-5)
-    assert {p.name for p in (tmp_path / "two").iterdir()} == {"best.pt", "last.pt", "result.pt"}
+    written = {p.name for p in (tmp_path / "two").iterdir()}
+    assert written == {"best.pt", "last.pt", "result0.pt", "result1.pt"}

@@ -6,7 +6,7 @@ channels, read in their file order ``(A1, A2, A3)``, give its rotation relative 
 as ``R = R_A1(a1) @ R_A2(a2) @ R_A3(a3)`` (angles in degrees); every joint names its own order.
 Position channels, where a joint has them (always the root), replace its offset for that frame.
 With every channel at zero the skeleton stands in its rest pose, each joint's world rotation the
-identity. Units are whatever the file's author used (centimetres, metres, inches).
+identity. Units are whatever the file's author used (centimetres, metres, millimetres).
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def read_bvh(path: str | os.PathLike) -> BvhTake:
             raise BvhError(f"{path} is a folder, not a BVH file")
         raise FileNotFoundError(f"{path} does not exist")
     try:
-        with open(path, encoding="utf-8", errors="replace") as stream:
+        with open(path, encoding="utf-8-sig", errors="replace") as stream:  # a BOM is read past
             return _read(stream, path)
     except UnicodeError as error:  # pragma: no cover - errors="replace" reads any bytes
         raise BvhError(f"{path} is not a text file ({error})") from None

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import tempfile
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -32,6 +34,8 @@ from gesturelib.conventions import FPS, NUM_ACTIVITIES, SAMPLE_RATE
 from gesturelib.features import load_audio, mix_voices, num_frames, save_audio, who_is_talking
 from gesturelib.mocap.bvh_reader import read_bvh
 from gesturelib.mocap.retarget import retarget
+from gesturelib.mocap.rigs import RigError
+from gesturelib.rotations import RotationError
 from gesturelib.skeleton import NUM_JOINTS
 
 FORMAT = "gesturelib.mocap"
@@ -43,6 +47,8 @@ LENGTH_TOLERANCE_S = 0.5
 #: Share of the takes in each of validation and test.
 HELD_OUT_FRACTION = 0.1
 PARTNER_SUFFIX = "_partner"
+#: A take's files in the dataset.
+SUFFIXES = (".wav", ".npz")
 
 
 class MocapError(ValueError):
@@ -127,7 +133,10 @@ def import_take(bvh: Path, wav: Path, partner: Path | None, rig: str | None = No
     take = read_bvh(bvh)
     _check_length(bvh, take.num_frames * take.frame_time, wav, seconds)
     frames = num_frames(len(agent), rate, FPS)
-    moved = retarget(take, frames, rig)
+    try:
+        moved = retarget(take, frames, rig)
+    except (RigError, RotationError) as error:
+        raise MocapError(f"{bvh}: {error}") from None
     activity = who_is_talking(agent, rate, partner_audio)
     recording = Recording(
         bvh.stem, voices.astype(np.float32), rate, FPS, activity, moved.rotations, moved.positions
@@ -176,16 +185,19 @@ def import_bvh(
 ) -> dict:
     """Import the takes of ``src`` into the dataset folder ``out`` (see the module docstring).
 
-    Every take is checked and imported before anything is written; the manifest is written
-    last. An existing dataset is replaced only with ``overwrite``, and then only the files its
-    manifest lists; other files in ``out`` are never touched.
+    The takes are imported one by one into a staging folder inside ``out`` and moved into place
+    only when every one has been, with the manifest last: a take that fails, or a full disk,
+    leaves ``out`` as it was. An earlier import in ``out`` is replaced only with ``overwrite``,
+    and then only the files its manifest lists; another dataset's folder, or files of the same
+    names that no import wrote, are refused.
 
     Returns:
         The manifest.
     Raises:
-        FileExistsError: ``out`` holds a dataset, or files this would write, without ``overwrite``.
+        FileExistsError: ``out`` holds an import without ``overwrite``, another kind of dataset,
+            or files in the way that no import wrote.
         MocapError: (a ``ValueError``) for a take that cannot be imported, naming its file;
-            and the reader's, the rig's and the audio's errors.
+            with the reader's and the audio's errors.
     """
     takes = find_takes(src)
     out = Path(out)
@@ -193,32 +205,81 @@ def import_bvh(
         raise MocapError(f"{out} is a file; give a folder for the dataset")
     splits = split_takes([name for name, *_ in takes])
     split_of = {name: split for split, names in splits.items() for name in names}
-    planned = [out / MANIFEST_NAME] + [
-        out / split_of[name] / f"{name}{suffix}"
-        for name, *_ in takes
-        for suffix in (".wav", ".npz")
+    listed = _listed_files(out, overwrite)
+    planned = [
+        out / split_of[name] / f"{name}{suffix}" for name, *_ in takes for suffix in SUFFIXES
     ]
-    in_the_way = [p for p in planned if p.exists()]
-    if in_the_way and not overwrite:
+    in_the_way = [p for p in planned if p.exists() and p not in listed]
+    if in_the_way:
         raise FileExistsError(
-            f"{out} already holds {in_the_way[0]}"
+            f"{out} holds {in_the_way[0]}"
             + (f" and {len(in_the_way) - 1} more" if len(in_the_way) > 1 else "")
-            + "; pass --overwrite (overwrite=True) to replace the dataset"
+            + ", which no import wrote; move them, or choose another folder"
         )
-    recordings, found = [], []
-    for _, bvh, wav, partner in tqdm(takes, desc="takes", disable=not progress):
-        recording, what = import_take(bvh, wav, partner, rig)
-        rig = what["rig"]  # every take of one dataset on one rig
-        recordings.append(recording)
-        found.append(what)
-    if overwrite and (out / MANIFEST_NAME).exists():
-        _remove_listed(out)
+    out.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=".importing-", dir=out))
+    try:
+        entries, found = _import_into(staging, takes, split_of, rig, progress)
+        manifest = {
+            "format": FORMAT,
+            "version": VERSION,
+            "source": str(Path(src).resolve()),
+            "rig": sorted({what["rig"] for what in found}),
+            "units": sorted({what["units"] for what in found}),
+            "fps": FPS,
+            "sample_rate": SAMPLE_RATE,
+            "splits": entries,
+        }
+        (staging / MANIFEST_NAME).write_text(json.dumps(manifest, indent=1))
+        for path in listed:  # the earlier import, now that the new one is whole
+            path.unlink(missing_ok=True)
+        for split in SPLITS:
+            (out / split).mkdir(exist_ok=True)
+            for entry in entries[split]:
+                for suffix in SUFFIXES:
+                    name = f"{entry['name']}{suffix}"
+                    os.replace(staging / split / name, out / split / name)
+        os.replace(staging / MANIFEST_NAME, out / MANIFEST_NAME)  # last: the dataset is whole
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return manifest
+
+
+def _listed_files(out: Path, overwrite: bool) -> set[Path]:
+    """The files of an earlier import in ``out`` (its manifest with them), which ``overwrite``
+    may replace; refuse an earlier import without ``overwrite``, and any other dataset."""
+    manifest_path = out / MANIFEST_NAME
+    if not manifest_path.exists():
+        return set()
+    try:
+        old = read_manifest(out)
+    except MocapError:
+        raise FileExistsError(
+            f"{out} holds another dataset (its {MANIFEST_NAME} is not an import's); choose "
+            "another folder"
+        ) from None
+    if not overwrite:
+        raise FileExistsError(
+            f"{out} already holds an imported dataset; pass --overwrite (overwrite=True) to "
+            "replace it"
+        )
+    files = {manifest_path}
+    for split, entries in old["splits"].items():
+        files |= {out / split / f"{e['name']}{suffix}" for e in entries for suffix in SUFFIXES}
+    return files
+
+
+def _import_into(staging: Path, takes, split_of: dict, rig, progress: bool):
+    """Import each take into ``staging/SPLIT/``; return the manifest's entries per split and what
+    each take's import found."""
     entries: dict[str, list] = {split: [] for split in SPLITS}
-    for recording, what in zip(recordings, found, strict=True):
-        split = split_of[recording.name]
-        (out / split).mkdir(parents=True, exist_ok=True)
-        stem = out / split / recording.name
-        save_audio(stem.with_suffix(".wav"), recording.audio, recording.sample_rate, overwrite=True)
+    found = []
+    for name, bvh, wav, partner in tqdm(takes, desc="takes", disable=not progress):
+        recording, what = import_take(bvh, wav, partner, rig)
+        split = split_of[name]
+        (staging / split).mkdir(exist_ok=True)
+        stem = staging / split / name
+        save_audio(stem.with_suffix(".wav"), recording.audio, recording.sample_rate)
         with open(stem.with_suffix(".npz"), "wb") as stream:
             np.savez_compressed(
                 stream,
@@ -228,38 +289,16 @@ def import_bvh(
             )
         entries[split].append(
             {
-                "name": recording.name,
+                "name": name,
                 "num_frames": recording.num_frames,
                 "duration_s": what["duration_s"],
                 "source_fps": what["source_fps"],
                 "units": what["units"],
+                "rig": what["rig"],
             }
         )
-    manifest = {
-        "format": FORMAT,
-        "version": VERSION,
-        "source": str(Path(src).resolve()),
-        "rig": rig,
-        "units": sorted({what["units"] for what in found}),
-        "fps": FPS,
-        "sample_rate": SAMPLE_RATE,
-        "splits": entries,
-    }
-    (out / MANIFEST_NAME).write_text(json.dumps(manifest, indent=1))
-    return manifest
-
-
-def _remove_listed(out: Path) -> None:
-    """Delete the manifest and the files an earlier import's manifest lists (only those)."""
-    try:
-        old = read_manifest(out)
-    except MocapError:
-        old = {"splits": {}}
-    for split, entries in old["splits"].items():
-        for entry in entries:
-            for suffix in (".wav", ".npz"):
-                (out / split / f"{entry['name']}{suffix}").unlink(missing_ok=True)
-    (out / MANIFEST_NAME).unlink()
+        found.append(what)
+    return entries, found
 
 
 def read_manifest(folder: str | os.PathLike) -> dict:

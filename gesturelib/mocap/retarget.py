@@ -104,15 +104,17 @@ def retarget(take: BvhTake, n_frames: int, rig: str | None = None, fps: int = FP
 
 
 def _rest_positions(take: BvhTake, joints: list[str]) -> np.ndarray:
-    """``(len(joints), 3)`` where the joints stand with every channel at zero."""
+    """``(len(joints), 3)`` where the joints stand in the rest pose: every rotation at zero, every
+    joint at its offset (position channels, which some rigs give every joint, set to it)."""
+    values = np.zeros((1, take.values.shape[1]))
+    column = 0
+    for joint, channels in enumerate(take.channels):
+        for channel in channels:
+            if channel.endswith("position"):
+                values[0, column] = take.offsets[joint]["XYZ".index(channel[0])]
+            column += 1
     rest = BvhTake(
-        take.names,
-        take.parents,
-        take.offsets,
-        take.channels,
-        take.frame_time,
-        np.zeros((1, take.values.shape[1])),
-        take.path,
+        take.names, take.parents, take.offsets, take.channels, take.frame_time, values, take.path
     )
     positions, _ = rest.world(joints)
     return positions[0]
@@ -122,6 +124,8 @@ def _rest_axes(rest: np.ndarray, where: dict[str, int]) -> np.ndarray:
     """Our x (left), y (up), z (forward) as columns, in the file's frame, from the rest pose."""
     up = rest[where["head"]] - rest[where["spine_base"]]
     left = rest[where["left_shoulder"]] - rest[where["right_shoulder"]]
+    if np.linalg.norm(up) < 1e-9:
+        raise RotationError("the rest pose's head sits on the spine's base")
     up /= np.linalg.norm(up)
     left = left - (left @ up) * up
     if np.linalg.norm(left) < 1e-9:
@@ -135,13 +139,11 @@ def _face_forward(keypoints: np.ndarray, forward: np.ndarray, source_fps: float)
     points along +z. ``keypoints (F, J, 3)``, ``forward (F, 3)`` in our axes."""
     horizontal = forward[:, [0, 2]]
     horizontal /= np.maximum(np.linalg.norm(horizontal, axis=1, keepdims=True), 1e-9)
-    width = max(1, round(FACING_WINDOW_S * source_fps))
+    width = 2 * int(round(FACING_WINDOW_S * source_fps / 2)) + 1  # odd: centred
     kernel = np.ones(width) / width
     smooth = np.stack(
         [
-            np.convolve(
-                np.pad(c, (width // 2, width - 1 - width // 2), mode="edge"), kernel, "valid"
-            )
+            np.convolve(np.pad(c, (width // 2, width // 2), mode="edge"), kernel, "valid")
             for c in horizontal.T
         ],
         axis=1,
@@ -160,13 +162,13 @@ def resample(positions: np.ndarray, source_fps: float, n_frames: int, fps: int =
     average of the source over the ``1/fps`` seconds around ``k / fps``, read by linear
     interpolation; past the source's end its last frame is held."""
     positions = np.asarray(positions, dtype=np.float64)
-    width = int(round(source_fps / fps))
-    if width > 1:  # average over one output frame: nothing faster than the output can show
+    # Average over about one output frame (nothing faster than the output can show), an odd
+    # number of source frames so that the average stays centred on its frame.
+    width = 2 * int(round((source_fps / fps - 1) / 2)) + 1
+    if width > 1:
         kernel = np.ones(width) / width
         padded = np.pad(
-            positions,
-            [(width // 2, width - 1 - width // 2)] + [(0, 0)] * (positions.ndim - 1),
-            mode="edge",
+            positions, [(width // 2, width // 2)] + [(0, 0)] * (positions.ndim - 1), mode="edge"
         )
         positions = np.apply_along_axis(lambda c: np.convolve(c, kernel, "valid"), 0, padded)
     where = np.minimum(np.arange(n_frames) * source_fps / fps, len(positions) - 1)
