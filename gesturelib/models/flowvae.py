@@ -21,15 +21,15 @@ differs from the paper in three settings explained below (``detach_prior``, ``re
 where the last term, the paper's novelty, decodes a latent *drawn from the flow* for the same
 control and asks it to be the real pose. ``sample_weight`` weighs it (0: the ablation). The
 encoder is deterministic, so NLL(h) is not a likelihood of ``x``: the encoder can lower it
-without end by shrinking ``h``, and the decoder can undo the shrinking. The remedy here is
-``latent_noise``: the flow and the decoder see ``h + sigma * eps`` with a fixed ``sigma``, so a
-shrunken latent drowns in the noise and can no longer be decoded. That makes the encoder a
-Gaussian with fixed variance, and the loss a weighted, beta-VAE-like objective. The noise has a
-price: the flow learns the latents *with* their noise, so every generated frame carries a fresh
-draw of it, which the decoder turns into jitter. The other remedy is ``detach_prior``: the NLL's
-gradient stops at ``h``, so it trains the flow (and the control encoder) to model the latents the
-autoencoder makes, and never the encoder to make latents that are easy to model; the encoder has
-no reason to shrink, and no noise is needed (``latent_noise=0``).
+without end by shrinking ``h``, and the decoder can undo the shrinking. Two remedies. The
+recipe's is ``detach_prior``: the NLL's gradient stops at ``h``, so it trains the flow (and the
+control encoder) to model the latents the autoencoder makes, and never the encoder to make
+latents that are easy to model; the encoder has no reason to shrink, and no noise is needed
+(``latent_noise=0``). The other is ``latent_noise``: the flow and the decoder see
+``h + sigma * eps`` with a fixed ``sigma``, so a shrunken latent drowns in the noise and can no
+longer be decoded. That makes the encoder a Gaussian with fixed variance, and the loss a
+weighted, beta-VAE-like objective; but the flow learns the latents *with* their noise, so every
+generated frame carries a fresh draw of it, which the decoder turns into jitter.
 
 :class:`VariationalFlowVAE` makes it a true ELBO on ``log p(x | c)``: a Gaussian encoder
 ``q(h | x)``, the flow as the conditional prior ``p(h | c)``, and a Gaussian decoder with a
@@ -305,7 +305,8 @@ class FlowVAE(_LatentFlowModel):
         return self.encoder(pose)
 
     def loss(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """The paper's loss per frame (eq. 4), with the remedies the config asks for (module docstring)."""
+        """The paper's loss per frame (eq. 4), with the remedies the config asks for (see the
+        module docstring)."""
         config = self.config
         pose, control, generator = self._pose_and_control(batch)
         latent = noisy = self.encode(pose)
