@@ -115,3 +115,33 @@ def test_every_model_that_is_not_a_generator_is_refused_by_generate(runs, held_o
     for name in set(RECIPES) - set(GENERATORS):
         command = ["generate", str(runs[name][2]), "--conversation", str(stem)]
         assert main([*command, "--out", str(tmp_path / name)]) == 2
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+@pytest.mark.parametrize("name", list(RECIPES))
+def test_a_gpu_trains_every_model_and_generates_what_the_cpu_does(
+    name, runs, splits, held_out, tmp_path
+):
+    """Training on a GPU gives a run that loads on the CPU; with z = 0 (temperature 0, no random
+    draw) the same run generates on the GPU the motion it generates on the CPU, to rounding."""
+    folder = tmp_path / "gpu"
+    trained = train_model(
+        name,
+        splits,
+        quick=True,
+        seed=1,
+        train_changes={"epochs": 1, "device": "cuda"},
+        out=folder,
+        progress=False,
+    )
+    assert all(p.is_cuda for p in trained.model.parameters())
+    model, _, _ = load_run(folder)
+    assert all(torch.isfinite(p).all() and not p.is_cuda for p in model.parameters())
+    if name in GENERATORS:
+        stem = held_out[0]
+        command = ["generate", str(runs[name][2]), "--conversation", str(stem), "--no-video"]
+        command += ["--temperature", "0"]
+        for device in ("cpu", "cuda"):
+            assert main([*command, "--out", str(tmp_path / device), "--device", device]) == 0
+        cpu, gpu = (np.load(tmp_path / d / "motion.npz")["positions"] for d in ("cpu", "cuda"))
+        np.testing.assert_allclose(gpu, cpu, atol=0.1)  # cm
