@@ -42,3 +42,28 @@ def test_a_removable_lock_is_gone_after_release_also_after_an_error(tmp_path):
     assert not path.exists()
     with exclusive(path):  # free again
         pass
+
+
+def test_two_processes_asking_for_one_dataset_write_it_once(tmp_path, capsys):
+    """The second waits for the first (threads here, whose file locks conflict as processes'
+    do), then finds the dataset written and reuses it."""
+    from data_synth.dataset import ensure_dataset
+
+    folder = tmp_path / "data" / "quick"
+    manifests, errors = [], []
+
+    def ask():
+        try:
+            manifests.append(
+                ensure_dataset(folder, minutes=0.3, seed=0, conversation_s=6.0, progress=False)
+            )
+        except Exception as error:  # noqa: BLE001 - reported below
+            errors.append(error)
+
+    askers = [threading.Thread(target=ask) for _ in range(2)]
+    for asker in askers:
+        asker.start()
+    for asker in askers:
+        asker.join(timeout=120)
+    assert not errors and len(manifests) == 2 and manifests[0] == manifests[1]
+    assert "Waiting for process" in capsys.readouterr().out
