@@ -50,12 +50,19 @@ REST_TURN = Rotation.from_euler("YX", [-120, 10], degrees=True).as_matrix()
 
 
 def write_rig_bvh(
-    path, rotations, fps, prefix="", yaw_deg=(70.0, 90.0), shift=(0.3, -0.1), positions=False
+    path,
+    rotations,
+    fps,
+    prefix="",
+    yaw_deg=(70.0, 90.0),
+    shift=(0.3, -0.1),
+    positions=False,
+    names=None,
 ):
     """Our limb rotations ``(T, 9, 6)`` at 25 fps as a take of :data:`RIG` at ``fps``: in metres,
     the rest pose turned by :data:`REST_TURN`, the body walking ``shift`` metres and turning from
     ``yaw_deg[0]`` to ``yaw_deg[1]`` degrees over the take; with ``positions``, every joint has
-    position channels (holding its offset), as some exporters write."""
+    position channels (holding its offset), as some exporters write; ``names`` renames joints."""
     limbs = rot6d_to_matrix(np.asarray(rotations, dtype=np.float64))  # (T, 9, 3, 3)
     n = int(round(len(limbs) * fps / 25))
     times = np.minimum(np.arange(n) / fps, (len(limbs) - 1) / 25)
@@ -84,7 +91,7 @@ def write_rig_bvh(
         offset = " ".join(f"{v:.6f}" for v in REST_TURN @ np.array(offset, dtype=float))
         lines.extend(
             [
-                f"{pad}{'ROOT' if parent is None else 'JOINT'} {prefix}{name}",
+                f"{pad}{'ROOT' if parent is None else 'JOINT'} {prefix}{(names or {}).get(name, name)}",
                 f"{pad}{{",
                 f"{pad}\tOFFSET {offset}",
                 f"{pad}\tCHANNELS {channels}",
@@ -141,17 +148,48 @@ def test_our_reader_agrees_with_a_bvh_library_on_a_foreign_rig(tmp_path, convers
     )
 
 
-@pytest.mark.parametrize("fps", [60, 120])
+#: The rig above as Talking With Hands (GENEA 2022, 2023) names its joints.
+GENEA_NAMES = {
+    "Hips": "b_root",
+    "Spine": "b_spine0",
+    "Spine1": "b_spine3",
+    "Neck": "b_neck0",
+    "Head": "b_head",
+    "HeadTop_End": "b_head_null",
+    **{
+        f"{side}{part}": f"b_{side[0].lower()}_{theirs}"
+        for side in ("Left", "Right")
+        for part, theirs in (
+            ("Shoulder", "shoulder"),
+            ("Arm", "arm"),
+            ("ForeArm", "forearm"),
+            ("Hand", "wrist"),
+            ("HandIndex1", "index1"),
+            ("UpLeg", "upleg"),
+            ("Leg", "leg"),
+        )
+    },
+}
+
+
+@pytest.mark.parametrize(
+    "fps, prefix, names, rig",
+    [
+        (60, "mixamorig:", None, "mixamo"),
+        (120, "", None, "mixamo"),
+        (120, "", GENEA_NAMES, "genea"),
+    ],
+)
 def test_a_foreign_rig_in_metres_turning_and_walking_lands_on_our_skeleton(
-    tmp_path, conversation, fps
+    tmp_path, conversation, fps, prefix, names, rig
 ):
     """Names, units, channel orders, frame rate, facing and the walk all differ from ours; the
     import gives back the generator's motion: every keypoint, the nod's nose included."""
     path = write_rig_bvh(
-        tmp_path / "take.bvh", conversation.rotations, fps=fps, prefix="mixamorig:"
+        tmp_path / "take.bvh", conversation.rotations, fps=fps, prefix=prefix, names=names
     )
     moved = retarget(read_bvh(path), conversation.num_frames)
-    assert (moved.rig, moved.units, moved.source_fps) == ("mixamo", "m", pytest.approx(fps))
+    assert (moved.rig, moved.units, moved.source_fps) == (rig, "m", pytest.approx(fps))
     error = np.linalg.norm(moved.positions - conversation.positions, axis=-1)  # cm
     inner = error[25:-25]  # a second from each end: the facing's average reaches past them
     assert np.median(inner) < 0.3 and inner.max() < 2.0, (np.median(inner), inner.max())
