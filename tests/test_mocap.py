@@ -65,7 +65,8 @@ def write_rig_bvh(
     position channels (holding its offset), as some exporters write; ``names`` renames joints."""
     limbs = rot6d_to_matrix(np.asarray(rotations, dtype=np.float64))  # (T, 9, 3, 3)
     n = int(round(len(limbs) * fps / 25))
-    times = np.minimum(np.arange(n) / fps, (len(limbs) - 1) / 25)
+    # Frames stand for the middle of their intervals: the file's (i + 0.5) / fps, ours (k + 0.5) / 25.
+    times = np.clip((np.arange(n) + 0.5) / fps - 0.5 / 25, 0, (len(limbs) - 1) / 25)
     keys = np.arange(len(limbs)) / 25
     limb_at = {
         name: Slerp(keys, Rotation.from_matrix(limbs[:, index]))(times).as_matrix()

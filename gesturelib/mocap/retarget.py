@@ -13,7 +13,8 @@ Steps, each for a reason:
    the root joint (its rest forward, turned with it), averaged over :data:`FACING_WINDOW_S`:
    slow turns go, a twist of the torso during a gesture stays.
 4. **25 fps**: each output frame averages the source frames of its 40 ms (no aliasing from
-   60 or 120 fps), then reads the result at its time by linear interpolation.
+   60 or 120 fps), then reads the result at the middle of its interval, as the course's frames
+   stand for (``gesturelib.features``), by linear interpolation.
 5. **Our skeleton**: each limb's direction becomes its rotation from the T-pose
    (:func:`gesturelib.skeleton.rotations_from_positions`); the keypoints are those rotations on
    our limbs (:func:`~gesturelib.skeleton.forward_kinematics`), so every dataset shares one
@@ -159,8 +160,10 @@ def _face_forward(keypoints: np.ndarray, forward: np.ndarray, source_fps: float)
 
 def resample(positions: np.ndarray, source_fps: float, n_frames: int, fps: int = FPS) -> np.ndarray:
     """``(F, ...)`` at ``source_fps`` -> ``(n_frames, ...)`` at ``fps``: frame ``k`` is the
-    average of the source over the ``1/fps`` seconds around ``k / fps``, read by linear
-    interpolation; past the source's end its last frame is held."""
+    average of the source over about ``1/fps`` seconds around the middle of frame ``k``,
+    ``(k + 0.5) / fps``, read by linear interpolation (each source frame standing for the middle
+    of its own interval, as the course's frames do); past the source's ends its first and last
+    frames are held."""
     positions = np.asarray(positions, dtype=np.float64)
     # Average over about one output frame (nothing faster than the output can show), an odd
     # number of source frames so that the average stays centred on its frame.
@@ -171,7 +174,8 @@ def resample(positions: np.ndarray, source_fps: float, n_frames: int, fps: int =
             positions, [(width // 2, width // 2)] + [(0, 0)] * (positions.ndim - 1), mode="edge"
         )
         positions = np.apply_along_axis(lambda c: np.convolve(c, kernel, "valid"), 0, padded)
-    where = np.minimum(np.arange(n_frames) * source_fps / fps, len(positions) - 1)
+    # A frame stands for the middle of its interval, ours (k + 0.5) / fps as the source's.
+    where = np.clip((np.arange(n_frames) + 0.5) * source_fps / fps - 0.5, 0, len(positions) - 1)
     below = np.floor(where).astype(int)
     above = np.minimum(below + 1, len(positions) - 1)
     weight = (where - below).reshape(-1, *([1] * (positions.ndim - 1)))
