@@ -16,12 +16,14 @@ Usage (``make benchmark`` runs it without arguments: the Flow-VAE's recipe, seed
     .venv/bin/python benchmarks/bench_quality.py moglow --seeds 0 1 2
     .venv/bin/python benchmarks/bench_quality.py flowvae --change latent_noise=0 --train epochs=20
     .venv/bin/python benchmarks/bench_quality.py moglow --temperature 0.8   # same models, colder
+    .venv/bin/python benchmarks/bench_quality.py diffusion --sampling steps=50 method=ddpm
 """
 
 from __future__ import annotations
 
 import argparse
 import ast
+import dataclasses
 import time
 from pathlib import Path
 
@@ -34,6 +36,7 @@ from gesturelib.evaluation.fgd import feature_network
 from gesturelib.evaluation.headline import drift
 from gesturelib.evaluation.rules import head_pitch
 from gesturelib.evaluation.table import score_draw
+from gesturelib.models import Sampling
 from gesturelib.pipeline import speech_to_motion, train_model
 from gesturelib.recipes import RECIPES
 from gesturelib.skeleton import forward_kinematics
@@ -114,12 +117,18 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--samples", type=int, default=3, help="draws per held-out conversation")
     parser.add_argument("--temperature", type=float, default=None, help="the model's own if unset")
+    parser.add_argument(
+        "--sampling", nargs="*", default=[], help="a diffusion model's Sampling fields: key=value"
+    )
     parser.add_argument("--quick", action="store_true", help="quick data and configs")
     parser.add_argument("--save", type=Path, help="a folder for each seed's draws (.npz)")
     args = parser.parse_args()
     model_changes, train_changes = parse_changes(args.change), parse_changes(args.train)
+    sampling = parse_changes(args.sampling)
     try:  # the configs, checked before any training
         RECIPES[args.model].settings(args.quick, model_changes, **train_changes)
+        if sampling:
+            Sampling(**sampling)
     except (TypeError, ValueError) as error:
         parser.error(str(error))
     torch.set_num_threads(1)
@@ -134,7 +143,7 @@ def main() -> None:
     )
     truth = head_speed([c.positions for c in test])
     print(f"ground truth: head_speed {truth:.4g}", flush=True)
-    label = " ".join([args.model, *args.change, *args.train]) + (
+    label = " ".join([args.model, *args.change, *args.train, *args.sampling]) + (
         f" T={args.temperature}" if args.temperature is not None else ""
     )
     rows = []
@@ -150,6 +159,8 @@ def main() -> None:
             cache=REPO / "checkpoints",
             progress=False,
         )
+        if sampling:
+            trained.model.sampling = dataclasses.replace(trained.model.sampling, **sampling)
         save = None
         if args.save is not None:
             args.save.mkdir(parents=True, exist_ok=True)

@@ -135,6 +135,7 @@ def run_generate(args) -> list[Path]:
     if args.style and not getattr(model.config, "style", False):
         raise CommandError(f"{args.run} was trained without style control; drop --style")
     style = _parse_style(args.style or [])
+    _set_sampling(model, args)
     if args.audio is not None:
         audio, sample_rate = load_audio(args.audio)
         partner = None if args.partner is None else load_audio(args.partner, sample_rate)[0]
@@ -186,6 +187,33 @@ def run_generate(args) -> list[Path]:
                     stage.path(f"{within}agent.mp4"),
                 )
     return stage.files
+
+
+def _set_sampling(model, args) -> None:
+    """Apply ``--steps``, ``--sampler`` and ``--guidance`` to a diffusion model; refuse them for
+    the others."""
+    import dataclasses
+
+    changes = {
+        field: value
+        for field, value in (
+            ("steps", args.steps),
+            ("method", args.sampler),
+            ("guidance", args.guidance),
+        )
+        if value is not None
+    }
+    if not changes:
+        return
+    if not hasattr(model, "sampling"):
+        given = ", ".join(f"--{'sampler' if f == 'method' else f}" for f in changes)
+        raise CommandError(
+            f"{args.run} holds a {type(model).__name__}, which does not denoise: drop {given}"
+        )
+    try:
+        model.sampling = dataclasses.replace(model.sampling, **changes)
+    except ValueError as error:
+        raise CommandError(str(error)) from None
 
 
 def _write_motion(stage, within: str, rotations, positions, activity) -> None:
@@ -542,6 +570,19 @@ def _parser() -> argparse.ArgumentParser:
     )
     generate.add_argument(
         "--style", nargs="+", metavar="NAME=PERCENTILE", help="e.g. hand_height=85"
+    )
+    generate.add_argument(
+        "--steps", type=_at_least(1), help="denoising steps per chunk (diffusion only)"
+    )
+    generate.add_argument(
+        "--sampler",
+        choices=("ddim", "ddpm"),
+        help="the reverse process (diffusion only; default ddim)",
+    )
+    generate.add_argument(
+        "--guidance",
+        type=float,
+        help="classifier-free guidance weight >= 0 (diffusion only; 1: none)",
     )
     generate.add_argument("--no-video", action="store_true", help="write motion.npz only")
     generate.add_argument(

@@ -67,7 +67,8 @@ def train_model(
         splits: a dataset's conversations, ``{"train": [...], "val": [...], ...}``.
         quick: the quick-mode recipe.
         model_changes: fields of the model config to change (a chapter's variant); window
-            fields the model config shares (past poses, speech context) follow it.
+            fields the model config sets (past poses, speech context, a diffusion chunk) follow
+            it.
         train_changes: fields of the training config to change (``epochs``, ``device``, ...).
         cache: the folder of cached runs (:func:`gesturelib.train.load_or_train`): a finished
             run is loaded, an interrupted one resumed. Used when ``out`` is None.

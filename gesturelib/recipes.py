@@ -18,6 +18,8 @@ name                model                   trained on
 ``imputation_dae``  the denoising            excerpts of 1 s, cut into windows of 5 poses: the
                     autoencoder of the      Flow-VAE paper's filler of lost limbs
                     Flow-VAE paper
+``diffusion``       the diffusion model     chunks of 0.4 s, with the poses before and the speech
+                                            around them
 ==================  ======================  ==========================================================
 """
 
@@ -38,8 +40,10 @@ from gesturelib.models import (
     Aud2Repr2Pose,
     Aud2Repr2PoseConfig,
     CVAEConfig,
+    DiffusionConfig,
     FlowVAE,
     FlowVAEConfig,
+    GestureDiffusion,
     MoGlow,
     MoGlowConfig,
     MotionDAEConfig,
@@ -86,7 +90,9 @@ class Recipe:
         config = self.quick_model_config if quick else self.model_config
         config = dataclasses.replace(config, **(model_changes or {}))
         windows = self.quick_windows if quick else self.windows
-        shared = {f: getattr(config, f) for f in _SHARED_WINDOW_FIELDS if hasattr(config, f)}
+        shared = {
+            w: getattr(config, f) for f, w in _SHARED_WINDOW_FIELDS.items() if hasattr(config, f)
+        }
         train = self.quick_train_config if quick else self.train_config
         return (
             dataclasses.replace(windows, **shared),
@@ -101,8 +107,13 @@ class Recipe:
         return self.build(config, normaliser, stage_one_model)
 
 
-#: Fields of a training window that a model config may hold too; the config's value wins.
-_SHARED_WINDOW_FIELDS = ("past_poses", "speech_past", "speech_future")
+#: Model-config fields that set a field of the training window: the config's value wins.
+_SHARED_WINDOW_FIELDS = {
+    "past_poses": "past_poses",
+    "speech_past": "speech_past",
+    "speech_future": "speech_future",
+    "chunk": "sequence_length",  # the diffusion model trains on windows of one chunk
+}
 _EXCERPTS = WindowConfig(sequence_length=100, stride=50)
 _QUICK_EXCERPTS = WindowConfig(sequence_length=50, stride=25)
 _FLOW_TRAINING = TrainConfig(epochs=30, batch_size=16, warmup_steps=500, patience=8)
@@ -189,6 +200,15 @@ RECIPES: dict[str, Recipe] = {
         MotionDAEConfig.taylor(hidden_sizes=(32, 16), representation_dim=12),
         TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5, drop_last=True),
         TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=50, drop_last=True),
+    ),
+    "diffusion": Recipe(
+        GestureDiffusion,
+        WindowConfig(stride=3),  # of one chunk each
+        WindowConfig(stride=5),
+        DiffusionConfig(),
+        DiffusionConfig.quick(),
+        TrainConfig(epochs=30, batch_size=64, warmup_steps=500, patience=8),
+        TrainConfig.quick(epochs=3, batch_size=32, warmup_steps=50),
     ),
 }
 

@@ -7,7 +7,10 @@ Every generative model of the course generates one frame at a time through the s
   (B, 1, tau, 54)``, ``speech (B, 1, W, 27)``, ``activity (B, 1, W, 4)``, ``style (B, 1, 4)``),
   the state after the previous frame (None at the start) and the noise of this frame;
 * ``model.noise_dim``: numbers of noise per frame (0 for a deterministic model);
-* ``model.generating()``: a context in which the weights are fixed (optional).
+* ``model.generating()``: a context in which the weights are fixed (optional);
+* a model may write ``n`` frames at once (the diffusion model's chunk): its ``step`` then
+  returns ``(B, n, 54)`` from the control of the first of them, and ``noise`` is the noise of
+  the whole chunk.
 
 :class:`Stream` keeps everything else: the speech and activity windows, padded with silence
 beyond either end, the model's own past poses (starting from the mean pose) and its state. A live
@@ -154,7 +157,9 @@ class Stream:
         self.finished = True
         future = self.speech_future
         self._append(self.silence.expand(future, -1), self.none.expand(future, -1))
-        return self._generate(self.received)
+        poses = self._generate(self.received)
+        # A model's last chunk may run past the recording's end.
+        return poses[:, : poses.shape[1] - (self.next_frame - self.received)]
 
     def _append(self, speech: torch.Tensor, activity: torch.Tensor) -> None:
         self.speech = torch.cat([self.speech, speech])
@@ -183,11 +188,11 @@ class Stream:
                         f"the model's pose for frame {self.next_frame} is NaN or infinite: its "
                         "weights are damaged or it diverged; retrain it"
                     )
-                pose = self._on_surface(pose)
+                chunk = self._on_surface(pose.reshape(self.samples, -1, POSE_DIM))  # (K, n, 54)
                 if self.past_poses:
-                    self.past = torch.cat([self.past[:, 1:], pose[:, None]], dim=1)
-                poses.append(pose)
-                self.next_frame += 1
+                    self.past = torch.cat([self.past, chunk], dim=1)[:, -self.past_poses :]
+                poses.append(chunk)
+                self.next_frame += chunk.shape[1]
         # Forget the frames no window will need again.
         drop = self.next_frame - self.speech_past - self.first
         self.speech, self.activity, self.first = (
@@ -197,7 +202,7 @@ class Stream:
         )
         if not poses:
             return np.zeros((self.samples, 0, NUM_JOINTS, 6))
-        raw = torch.stack(poses, dim=1) * self.pose_std + self.pose_mean
+        raw = torch.cat(poses, dim=1) * self.pose_std + self.pose_mean
         return raw.double().cpu().numpy().reshape(self.samples, -1, NUM_JOINTS, 6)
 
     def _noise(self) -> torch.Tensor:
@@ -210,7 +215,7 @@ class Stream:
         return self.temperature * standard_normal((self.samples, dim), self.generators, self.device)
 
     def _on_surface(self, pose: torch.Tensor) -> torch.Tensor:
-        """``pose`` ``(K, 54)`` (normalised) with every limb put back on the pose surface."""
+        """``pose`` ``(..., 54)`` (normalised) with every limb put back on the pose surface."""
         raw = (pose * self.pose_std + self.pose_mean).unflatten(-1, (NUM_JOINTS, 6))
         return (project(raw).flatten(-2) - self.pose_mean) / self.pose_std
 

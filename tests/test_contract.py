@@ -110,6 +110,17 @@ def test_a_generating_model_generates_through_the_command_line(name, runs, held_
     assert motion["positions"].shape == (frames, 9, 3)
 
 
+@pytest.mark.parametrize("name", GENERATORS)
+def test_only_a_diffusion_run_takes_denoising_steps_and_guidance(name, runs, held_out, tmp_path):
+    stem, frames = held_out
+    command = ["generate", str(runs[name][2]), "--conversation", str(stem), "--no-video"]
+    command += ["--steps", "3", "--sampler", "ddpm", "--guidance", "2", "--out", str(tmp_path)]
+    denoises = hasattr(runs[name][0].model, "sampling")
+    assert main(command) == (0 if denoises else 2)
+    if denoises:
+        assert np.load(tmp_path / "motion.npz")["rotations"].shape == (frames, 9, 6)
+
+
 def test_every_model_that_is_not_a_generator_is_refused_by_generate(runs, held_out, tmp_path):
     stem = held_out[0]
     for name in set(RECIPES) - set(GENERATORS):

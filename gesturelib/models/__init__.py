@@ -14,6 +14,8 @@ rebuilds it (``Model.config_class``). Configs have working defaults for the cour
 * :mod:`~gesturelib.models.flowvae`: :class:`FlowVAE`, the conditional Flow-VAE of Taylor et al.,
   and :class:`VariationalFlowVAE`, its variant whose loss is an ELBO.
 * :mod:`~gesturelib.models.control`: the control those flows are conditioned on.
+* :mod:`~gesturelib.models.diffusion`: :class:`GestureDiffusion`, a denoising diffusion model
+  writing short chunks of poses.
 """
 
 from gesturelib.models.baselines import (
@@ -25,6 +27,7 @@ from gesturelib.models.baselines import (
     MotionDenoisingAutoencoder,
     SpeechWindowNet,
 )
+from gesturelib.models.diffusion import DiffusionConfig, GestureDiffusion, Sampling
 from gesturelib.models.flowvae import (
     FlowVAE,
     FlowVAEConfig,
@@ -50,8 +53,10 @@ __all__ = [
     "Aud2Repr2Pose",
     "Aud2Repr2PoseConfig",
     "CVAEConfig",
+    "DiffusionConfig",
     "FlowVAE",
     "FlowVAEConfig",
+    "GestureDiffusion",
     "MoGlow",
     "MoGlowConfig",
     "MotionDAEConfig",
@@ -60,6 +65,7 @@ __all__ = [
     "PoseAutoencoderConfig",
     "PoseVAE",
     "PoseVAEConfig",
+    "Sampling",
     "SpeechWindowNet",
     "VariationalFlowVAE",
     "VariationalFlowVAEConfig",

@@ -68,6 +68,21 @@ class ControlConfig(SpeechContext):
         return self.control_size or self.raw_control_size
 
 
+def control_shapes(config) -> dict[str, tuple[int, ...]]:
+    """The parts of a frame's control and their shapes after ``(B, L)``, for
+    :func:`~gesturelib.models.common.batch_parts`: ``past_pose``, ``speech``, ``activity`` (and
+    ``style`` if ``config.style``). ``config``: any config with ``past_poses``, the speech window
+    and ``style``."""
+    shapes = {
+        "past_pose": (config.past_poses, POSE_DIM),
+        "speech": (config.speech_window, N_MELS),
+        "activity": (config.speech_window, NUM_ACTIVITIES),
+    }
+    if config.style:
+        shapes["style"] = (len(STYLE_FEATURES),)
+    return shapes
+
+
 class ControlEncoder(nn.Module):
     """The control of every frame of a batch: ``(B, L, encoded_size)``.
 
@@ -93,14 +108,7 @@ class ControlEncoder(nn.Module):
         (and ``style (B, L, 4)``) into ``(B, L, encoded_size)``; ``drop_past`` applies data
         dropout (training only)."""
         config = self.config
-        expected = {
-            "past_pose": (config.past_poses, POSE_DIM),
-            "speech": (config.speech_window, N_MELS),
-            "activity": (config.speech_window, NUM_ACTIVITIES),
-        }
-        if config.style:
-            expected["style"] = (len(STYLE_FEATURES),)
-        past, *rest = batch_parts(batch, expected, type(self).__name__)
+        past, *rest = batch_parts(batch, control_shapes(config), type(self).__name__)
         if drop_past and config.dropout > 0:
             kept = torch.rand(past.shape[:3], device=past.device) >= config.dropout
             past = past * kept[..., None]  # a dropped pose becomes the mean pose, zero
