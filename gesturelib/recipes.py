@@ -207,7 +207,7 @@ RECIPES: dict[str, Recipe] = {
         WindowConfig(stride=5),
         DiffusionConfig(),
         DiffusionConfig.quick(),
-        TrainConfig(epochs=30, batch_size=64, warmup_steps=500, patience=8),
+        TrainConfig(epochs=10, batch_size=64, warmup_steps=500, patience=4),  # 15 min
         TrainConfig.quick(epochs=3, batch_size=32, warmup_steps=50),
     ),
 }

@@ -190,3 +190,20 @@ def test_the_viewer_takes_several_motions():
     assert viewer.activity == [0] * 5 and viewer.count == 3
     assert viewer.audio == wav_data_url(np.zeros(3200), 16000)
     assert len(viewer.bones) == len(viewer.colours) == 9  # a bone ends at each keypoint
+
+
+def test_the_explorer_takes_a_diffusion_model_beside_a_flow(moglow_run, short_windows):
+    import torch
+
+    from gesturelib.models import DiffusionConfig, GestureDiffusion
+
+    flow, normaliser, _ = load_run(moglow_run)
+    torch.manual_seed(0)
+    diffusion = GestureDiffusion(DiffusionConfig.quick()).eval()
+    clips = {"held-out": Clip.from_conversation(short_windows[0], start_s=1.0, seconds=4.0)}
+    both = Explorer({"moglow": (flow, normaliser), "diffusion": (diffusion, normaliser)}, clips)
+    both.model.value, both.truth.value, both.seed.value = "diffusion", False, 2
+    take = both.render()
+    assert take.titles == ("diffusion",) and take.motions.shape == (1, 4 * FPS, 9, 3)
+    assert np.isfinite(take.motions).all()
+    np.testing.assert_array_equal(both.render().motions, take.motions)

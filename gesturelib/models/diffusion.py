@@ -29,6 +29,14 @@ Training draws ``s`` uniformly and regresses the target (mean squared error):
 * ``"epsilon"``: the noise;  ``"x0"``: the clean chunk;  ``"v"``: ``alpha eps - sigma x_0``
   (Salimans & Ho 2022), which keeps the target's scale at every level.
 
+The recipe predicts ``x0``, as most motion models do (MDM, DiffuseStyleGesture): predicting
+``epsilon`` or ``v``, the clean chunk is what is left of ``x_s`` after the predicted noise is
+taken away, and the noise the network fails to find at low levels stays in the motion as jitter;
+predicting ``x0``, the network's output is the motion. It adds (``velocity_weight``) the squared
+error of the clean estimate's velocities, from the last past pose on (MDM's "geometric" loss),
+for the seams, where a chunk's first frame must continue the last pose. The measurements behind
+both choices are in ``docs/benchmarks.md``.
+
 **Sampling** (:func:`denoise`): from ``x_1 = noise`` down to ``s = 0`` in ``steps`` equal steps;
 ``method="ddim"`` is deterministic given ``x_1`` (Song et al.), ``"ddpm"`` draws fresh noise at
 each step (the ancestral sampler, Ho et al.).
@@ -40,8 +48,9 @@ the same network also predicts unconditioned motion; sampling with ``guidance = 
 style more closely. The past poses are hidden with probability ``past_dropout`` (the first chunk
 of a recording starts from the mean pose, and the model must not merely continue its past).
 
-Logged scalars (``loss(batch)``): ``loss``, the mean squared error of the prediction (normalised
-pose units).
+Logged scalars (``loss(batch)``): ``prediction``, the mean squared error of the prediction
+(normalised pose units); ``velocity``, that of the clean estimate's frame-to-frame velocities
+(from the last past pose on); ``loss = prediction + velocity_weight * velocity``.
 """
 
 from __future__ import annotations
@@ -85,6 +94,8 @@ class DiffusionConfig(SpeechContext):
         unconditioned: probability of hiding speech, activity and style while training (for
             classifier-free guidance).
         past_dropout: probability of hiding the past poses while training.
+        velocity_weight: weight of the squared error of the clean estimate's velocities (frame
+            to frame, from the last past pose on) in the loss.
     """
 
     speech_past: int = 15
@@ -93,9 +104,10 @@ class DiffusionConfig(SpeechContext):
     style: bool = False
     width: int = 128
     layers: int = 8
-    prediction: str = "v"
+    prediction: str = "x0"
     unconditioned: float = 0.1
     past_dropout: float = 0.1
+    velocity_weight: float = 1.0
 
     def __post_init__(self):
         super().__post_init__()
@@ -104,6 +116,7 @@ class DiffusionConfig(SpeechContext):
             counts=("past_poses",),
             positive=("chunk", "width", "layers"),
             fractions=("unconditioned", "past_dropout"),
+            non_negative=("velocity_weight",),
             flags=("style",),
         )
         if self.past_poses > self.speech_past:
@@ -119,6 +132,11 @@ class DiffusionConfig(SpeechContext):
         if self.prediction not in PREDICTIONS:
             raise ValueError(
                 f"DiffusionConfig.prediction must be one of {PREDICTIONS}, got {self.prediction!r}"
+            )
+        if self.prediction == "epsilon" and self.velocity_weight > 0:
+            raise ValueError(
+                "DiffusionConfig.velocity_weight needs prediction 'x0' or 'v': the clean estimate "
+                "of an 'epsilon' prediction is unbounded at high noise (divided by alpha)"
             )
 
     @classmethod
@@ -298,7 +316,8 @@ class GestureDiffusion(nn.Module):
         return self.sampling.draws * self.config.chunk * POSE_DIM
 
     def loss(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """Mean squared error of the prediction at a random noise level per chunk."""
+        """The squared errors of the prediction and of its velocities at a random noise level
+        per chunk (module docstring)."""
         pose, condition = self._parts(batch, "GestureDiffusion.loss")
         config = self.config
         if pose.shape[1] != config.chunk:
@@ -315,17 +334,30 @@ class GestureDiffusion(nn.Module):
         level = uniform(len(pose))
         noise = torch.randn(pose.shape, generator=generator, device=pose.device)
         alpha, sigma = (value[:, None, None] for value in alpha_sigma(level))
-        noisy = alpha * pose + sigma * noise
         hide = {}
         if self.training:
             hide = {
                 "condition_hidden": uniform(len(pose)) < config.unconditioned,
                 "past_hidden": uniform(len(pose)) < config.past_dropout,
             }
+        noisy = alpha * pose + sigma * noise
         output = self._network(noisy, level, condition, **hide)
         target = target_of(pose, noise, alpha, sigma, config.prediction)
-        loss = (output - target).pow(2).mean()
-        return {"loss": loss}
+        error = (output - target).pow(2).mean()
+        # The velocities of the clean estimate, from the last past pose on (where it is shown):
+        # the step into the chunk is where chunks meet.
+        clean = clean_and_noise(output, noisy, alpha, sigma, config.prediction)[0]
+        last = condition["past"][:, -1:] if config.past_poses else pose[:, :1]
+        speed_error = (
+            torch.cat([last, clean], 1).diff(dim=1) - torch.cat([last, pose], 1).diff(dim=1)
+        ).pow(2)
+        if "past_hidden" in hide:  # no step into a chunk whose past was hidden
+            shown = torch.ones(speed_error.shape[:2], device=pose.device)
+            shown[:, 0] = ~hide["past_hidden"]
+            speed_error = speed_error * shown[..., None]
+        velocity = speed_error.mean()
+        loss = error + config.velocity_weight * velocity
+        return {"loss": loss, "prediction": error.detach(), "velocity": velocity.detach()}
 
     @torch.no_grad()
     def step(self, frame: dict[str, torch.Tensor], state, noise: torch.Tensor):
