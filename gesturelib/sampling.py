@@ -8,9 +8,16 @@ Every generative model of the course generates one frame at a time through the s
   the state after the previous frame (None at the start) and the noise of this frame;
 * ``model.noise_dim``: numbers of noise per frame (0 for a deterministic model);
 * ``model.generating()``: a context in which the weights are fixed (optional);
-* a model may write ``n`` frames at once (the diffusion model's chunk): its ``step`` then
-  returns ``(B, n, 54)`` from the control of the first of them, and ``noise`` is the noise of
-  the whole chunk.
+* a model may write ``n`` frames at once (the diffusion model's chunk, ``config.chunk``): its
+  ``step`` then returns ``(B, n, 54)`` from the control of the first of them, and ``noise`` is
+  the noise of the whole chunk.
+
+**Overlapping chunks.** Chunks laid end to end meet with a jump: a chunk is written from the poses
+before it but does not land exactly on them. So a chunk's last ``overlap`` frames are held back,
+the next chunk is asked for from the first held frame on (its past ends before them), and over
+those frames the two are cross-faded, the old one's weight falling linearly from 1 to 0 (as
+DiffuseStyleGesture blends its windows). The jump is spread over the overlap, at the price of
+``n / (n - overlap)`` times the model's work per frame.
 
 :class:`Stream` keeps everything else: the speech and activity windows, padded with silence
 beyond either end, the model's own past poses (starting from the mean pose) and its state. A live
@@ -67,9 +74,22 @@ class Stream:
         style: the style to hold, ``(4,)`` raw values (e.g. from
             ``normaliser.style_at_percentiles``), for a model with style control; None for its
             median.
+        overlap: for a model that writes chunks, the frames by which one chunk overlaps the
+            next, cross-faded (module docstring); None for half a chunk, 0 for chunks laid end
+            to end.
     """
 
-    def __init__(self, model, normaliser, *, samples=1, temperature=None, seed=None, style=None):
+    def __init__(
+        self,
+        model,
+        normaliser,
+        *,
+        samples=1,
+        temperature=None,
+        seed=None,
+        style=None,
+        overlap=None,
+    ):
         if not callable(getattr(model, "step", None)) or not hasattr(model, "config"):
             raise TypeError(
                 f"model must generate motion (a model with step() and a config), got "
@@ -87,8 +107,18 @@ class Stream:
         self.generators = _generators(seed, samples)
         config = model.config
         self.past_poses = getattr(config, "past_poses", 0)
+        chunk = getattr(config, "chunk", 1)
+        self.overlap = chunk // 2 if overlap is None else overlap
+        if isinstance(self.overlap, bool) or not isinstance(self.overlap, int | np.integer):
+            raise TypeError(f"overlap must be an int or None, got {overlap!r}")
+        if not 0 <= self.overlap < chunk:
+            raise ValueError(
+                f"overlap must lie in 0..{chunk - 1} for chunks of {chunk} frames, got {overlap}"
+            )
         self.speech_past, self.speech_future = config.speech_past, config.speech_future
         self.device = device_of(model)
+        # The new chunk's weight over the overlap, (overlap,): (j + 1) / (overlap + 1).
+        self.fade_in = torch.arange(1, self.overlap + 1, device=self.device) / (self.overlap + 1)
         self.state = None
         self.past = torch.zeros(samples, self.past_poses, POSE_DIM, device=self.device)
         tensor = functools.partial(torch.as_tensor, dtype=torch.float32, device=self.device)
@@ -102,6 +132,8 @@ class Stream:
         self.activity = self.none.expand(self.speech_past, -1)
         self.first = -self.speech_past
         self.next_frame = 0  # the frame whose pose comes next
+        # The last chunk's frames from next_frame on, held back to be cross-faded, (K, m, 54).
+        self.held = torch.zeros(samples, 0, POSE_DIM, device=self.device)
         self.received = 0
         self.style = None
         self.finished = False
@@ -158,8 +190,10 @@ class Stream:
         future = self.speech_future
         self._append(self.silence.expand(future, -1), self.none.expand(future, -1))
         poses = self._generate(self.received)
+        held = self._rotations([self.held]) if self.held.shape[1] else poses[:, :0]
+        poses = np.concatenate([poses, held], axis=1)
         # A model's last chunk may run past the recording's end.
-        return poses[:, : poses.shape[1] - (self.next_frame - self.received)]
+        return poses[:, : poses.shape[1] - (self.next_frame + self.held.shape[1] - self.received)]
 
     def _append(self, speech: torch.Tensor, activity: torch.Tensor) -> None:
         self.speech = torch.cat([self.speech, speech])
@@ -189,6 +223,7 @@ class Stream:
                         "weights are damaged or it diverged; retrain it"
                     )
                 chunk = self._on_surface(pose.reshape(self.samples, -1, POSE_DIM))  # (K, n, 54)
+                chunk = self._cross_faded(chunk)
                 if self.past_poses:
                     self.past = torch.cat([self.past, chunk], dim=1)[:, -self.past_poses :]
                 poses.append(chunk)
@@ -202,6 +237,24 @@ class Stream:
         )
         if not poses:
             return np.zeros((self.samples, 0, NUM_JOINTS, 6))
+        return self._rotations(poses)
+
+    def _cross_faded(self, chunk: torch.Tensor) -> torch.Tensor:
+        """The frames of a new chunk ``(K, n, 54)`` that are final: its first frames faded in
+        over the held ones, up to the ``overlap`` frames it now holds back."""
+        if self.overlap == 0:
+            return chunk
+        assert chunk.shape[1] > self.overlap, "a chunk must be longer than its overlap"
+        held, m = self.held, self.held.shape[1]
+        if m:
+            fade = self.fade_in[:m, None]
+            blended = self._on_surface(held * (1 - fade) + chunk[:, :m] * fade)
+            chunk = torch.cat([blended, chunk[:, m:]], dim=1)
+        self.held = chunk[:, -self.overlap :]
+        return chunk[:, : -self.overlap]
+
+    def _rotations(self, poses: list[torch.Tensor]) -> np.ndarray:
+        """Normalised poses ``(K, n, 54)`` joined in time, as limb rotations ``(K, T, 9, 6)``."""
         raw = torch.cat(poses, dim=1) * self.pose_std + self.pose_mean
         return raw.double().cpu().numpy().reshape(self.samples, -1, NUM_JOINTS, 6)
 

@@ -17,6 +17,7 @@ from gesturelib.models.diffusion import (
     denoise,
     target_of,
 )
+from gesturelib.pose_surface import project
 from gesturelib.sampling import Stream, generate
 
 SMALL = DiffusionConfig.quick(speech_past=4, speech_future=6, past_poses=3, chunk=5, width=16)
@@ -173,25 +174,28 @@ def test_ddpm_needs_noise_for_every_step():
     assert model.noise_dim == 7 * chunk
 
 
+@pytest.mark.parametrize("overlap", [0, 2])
 @pytest.mark.parametrize("frames", [1, 4, 5, 6, 23])
-def test_chunks_stream_exactly_the_recording_whatever_the_pieces_pushed(data, frames):
+def test_chunks_stream_exactly_the_recording_whatever_the_pieces_pushed(data, frames, overlap):
     conversation, normaliser, _ = data
     model = random_model()
     model.sampling = Sampling(steps=3)
     speech = speech_features(conversation.audio, conversation.sample_rate)[:frames]
     activity = conversation.activity[:frames]
-    whole = generate(model, normaliser, speech, activity, samples=2, seed=3)
+    options = {"samples": 2, "seed": 3, "overlap": overlap}
+    whole = generate(model, normaliser, speech, activity, **options)
     assert whole.shape == (2, frames, 9, 6) and np.isfinite(whole).all()
-    stream, parts = Stream(model, normaliser, samples=2, seed=3), []
+    stream, parts = Stream(model, normaliser, **options), []
     for start in range(0, frames, 3):
         parts.append(stream.push(speech[start : start + 3], activity[start : start + 3]))
     parts.append(stream.finish())
     np.testing.assert_allclose(np.concatenate(parts, axis=1), whole, atol=1e-5)
 
 
-def test_a_chunk_continues_from_the_poses_the_stream_fed_back(data):
-    """The second chunk's past poses are the first chunk's last ones: changing the first chunk's
-    noise changes the second chunk, even at temperature 0 for the second."""
+@pytest.mark.parametrize("overlap", [0, 2])
+def test_a_chunk_continues_from_the_poses_the_stream_fed_back(data, overlap):
+    """The second chunk, asked for ``chunk - overlap`` frames after the first, is given the
+    poses written before it as its past."""
     conversation, normaliser, _ = data
     model = random_model()
     model.sampling = Sampling(steps=3)
@@ -205,14 +209,58 @@ def test_a_chunk_continues_from_the_poses_the_stream_fed_back(data):
         return original(frame, state, noise)
 
     model.step = recording_step
-    poses = generate(model, normaliser, speech, activity, seed=0)
-    assert len(seen) == 2
-    first_chunk = torch.as_tensor(
-        normaliser.normalise_pose(poses[0, : SMALL.chunk].reshape(-1, 54))
+    poses = generate(model, normaliser, speech, activity, seed=0, overlap=overlap)
+    stride = SMALL.chunk - overlap
+    assert len(seen) == -(-len(speech) // stride)
+    written = torch.as_tensor(normaliser.normalise_pose(poses[0, :stride].reshape(-1, 54)))
+    torch.testing.assert_close(seen[1][0], written[-SMALL.past_poses :].float(), atol=1e-4, rtol=0)
+
+
+class AlternatingChunks(torch.nn.Module):
+    """A chunk model that writes ``pose_a`` for its even calls and ``pose_b`` for its odd ones."""
+
+    def __init__(self, pose_a, pose_b):
+        super().__init__()
+        self.config, self.noise_dim, self.calls = SMALL, 0, 0
+        self.poses = (pose_a, pose_b)
+
+    def step(self, frame, state, noise):
+        pose = self.poses[self.calls % 2]
+        self.calls += 1
+        return pose.expand(len(noise), SMALL.chunk, -1), state
+
+
+def test_overlapping_chunks_are_cross_faded_linearly_and_put_back_on_the_surface(data):
+    conversation, normaliser, _ = data
+    raw_a, raw_b = conversation.rotations[[0, 150]].reshape(2, 54)
+    pose_a, pose_b = (torch.as_tensor(normaliser.normalise_pose(p)).float() for p in (raw_a, raw_b))
+    speech = speech_features(conversation.audio, conversation.sample_rate)[:12]
+    model = AlternatingChunks(pose_a, pose_b)
+    poses = generate(model, normaliser, speech, conversation.activity[:12], overlap=2)[0]
+    # Chunks of 5 asked for every 3 frames: a at 0-4, b at 3-7, a at 6-10, b at 9-13.
+    fade = np.array([1 / 3, 2 / 3])[:, None]
+    a_to_b = project(torch.as_tensor(raw_a * (1 - fade) + raw_b * fade).reshape(2, 9, 6))
+    np.testing.assert_allclose(
+        poses[:3], np.broadcast_to(raw_a.reshape(9, 6), (3, 9, 6)), atol=1e-5
     )
-    torch.testing.assert_close(
-        seen[1][0], first_chunk[-SMALL.past_poses :].float(), atol=1e-4, rtol=0
-    )
+    np.testing.assert_allclose(poses[3:5], a_to_b.numpy(), atol=1e-5)
+    np.testing.assert_allclose(poses[5], raw_b.reshape(9, 6), atol=1e-5)
+    np.testing.assert_allclose(poses[6:8], a_to_b.numpy()[::-1], atol=1e-5)  # b to a
+    np.testing.assert_allclose(poses[8], raw_a.reshape(9, 6), atol=1e-5)
+    assert poses.shape == (12, 9, 6)  # the last chunk's held frames cut at the end
+    without = generate(model, normaliser, speech, conversation.activity[:12], overlap=0)[0]
+    np.testing.assert_allclose(without[5], raw_b.reshape(9, 6), atol=1e-5)  # laid end to end
+    assert np.abs(np.diff(poses, axis=0)).max() < np.abs(np.diff(without, axis=0)).max() / 2
+
+
+def test_an_overlap_a_chunk_cannot_hold_is_refused(data):
+    _, normaliser, _ = data
+    model = random_model()
+    for overlap in (-1, SMALL.chunk):
+        with pytest.raises(ValueError, match="overlap must lie in 0..4"):
+            Stream(model, normaliser, overlap=overlap)
+    with pytest.raises(TypeError, match="overlap must be an int"):
+        Stream(model, normaliser, overlap=2.5)
 
 
 def test_bad_configs_and_batches_are_refused_with_what_to_do(data):

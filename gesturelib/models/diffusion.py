@@ -3,10 +3,10 @@ conditioned on the speech around it and on the poses just before it.
 
 Where MoGlow writes one pose at a time, the diffusion model writes a **chunk** of ``C`` poses
 (0.4 s) at once, by removing noise from them in a few steps (Ho et al. 2020; Song et al. 2021),
-as "Listen, denoise, action!" and DiffuseStyleGesture do for whole clips. Chunks follow one
-another, each conditioned on the last ``tau`` poses of the one before, so motion of any length
-streams out with the same :mod:`gesturelib.sampling` protocol as the flows, ``C`` frames per
-step.
+as "Listen, denoise, action!" and DiffuseStyleGesture do for whole clips. Each chunk is
+conditioned on the last ``tau`` poses written before it, so motion of any length streams out
+with the same :mod:`gesturelib.sampling` protocol as the flows, ``C`` frames per step; the stream
+overlaps consecutive chunks by half a chunk and cross-fades them, for the seams.
 
 **The timeline.** A chunk starting at frame ``t`` is denoised on a timeline of the frames
 ``t - speech_past .. t + speech_future`` (the speech window of frame ``t``, 1 s ahead), which
