@@ -44,8 +44,8 @@ NB ?=
 check-full: setup
 	$(BIN)/python tools/check_full.py $(NB)
 
-## make results: every model from three seeds against the references (full mode, 80 minutes
-## the first time); writes outputs/results/ and the README's results table
+## make results: every model from three seeds against the references (full mode, about two
+## hours the first time); writes outputs/results/ and the README's results table
 results: setup
 	$(BIN)/python tools/results.py
 

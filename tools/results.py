@@ -13,7 +13,8 @@ Usage::
     .venv/bin/python tools/results.py --models moglow cvae &     # share the training between
     .venv/bin/python tools/results.py --models aud2pose flowvae  # cores, then run it without
 
-Training every model from three seeds took 73 minutes on one core here (and 7 more to score them); later calls reuse them.
+Training every model but the diffusion model from three seeds took 73 minutes on one core here (and 7
+more to score them); the diffusion model's three seeds take about 45 more. Later calls reuse them.
 """
 
 from __future__ import annotations
