@@ -15,8 +15,8 @@ Every generative model of the course generates one frame at a time through the s
 **Overlapping chunks.** Chunks laid end to end meet with a jump: a chunk is written from the poses
 before it but does not land exactly on them. So a chunk's last ``overlap`` frames are held back,
 the next chunk is asked for from the first held frame on (its past ends before them), and over
-those frames the two are cross-faded, the old one's weight falling linearly from 1 to 0 (as
-DiffuseStyleGesture blends its windows). The jump is spread over the overlap, at the price of
+those frames the two are cross-faded, the new one's weight rising linearly, ``1 / (overlap + 1)``
+to ``overlap / (overlap + 1)`` (as DiffuseStyleGesture blends its windows). The jump is spread over the overlap, at the price of
 ``n / (n - overlap)`` times the model's work per frame.
 
 :class:`Stream` keeps everything else: the speech and activity windows, padded with silence
@@ -190,8 +190,7 @@ class Stream:
         future = self.speech_future
         self._append(self.silence.expand(future, -1), self.none.expand(future, -1))
         poses = self._generate(self.received)
-        held = self._rotations([self.held]) if self.held.shape[1] else poses[:, :0]
-        poses = np.concatenate([poses, held], axis=1)
+        poses = np.concatenate([poses, self._rotations([self.held])], axis=1)
         # A model's last chunk may run past the recording's end.
         return poses[:, : poses.shape[1] - (self.next_frame + self.held.shape[1] - self.received)]
 
@@ -245,10 +244,9 @@ class Stream:
         if self.overlap == 0:
             return chunk
         assert chunk.shape[1] > self.overlap, "a chunk must be longer than its overlap"
-        held, m = self.held, self.held.shape[1]
-        if m:
-            fade = self.fade_in[:m, None]
-            blended = self._on_surface(held * (1 - fade) + chunk[:, :m] * fade)
+        if self.held.shape[1]:  # none before the first chunk
+            fade, m = self.fade_in[:, None], self.overlap
+            blended = self._on_surface(self.held * (1 - fade) + chunk[:, :m] * fade)
             chunk = torch.cat([blended, chunk[:, m:]], dim=1)
         self.held = chunk[:, -self.overlap :]
         return chunk[:, : -self.overlap]
