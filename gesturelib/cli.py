@@ -135,6 +135,7 @@ def run_generate(args) -> list[Path]:
     if args.style and not getattr(model.config, "style", False):
         raise CommandError(f"{args.run} was trained without style control; drop --style")
     style = _parse_style(args.style or [])
+    style_from = None if args.style_from is None else _reference_motion(args.style_from, model)
     _set_sampling(model, args)
     if args.audio is not None:
         audio, sample_rate = load_audio(args.audio)
@@ -163,6 +164,7 @@ def run_generate(args) -> list[Path]:
             partner=partner,
             activity=activity,
             style=style,
+            style_from=style_from,
             samples=args.samples,
             temperature=args.temperature,
             seed=args.seed,
@@ -187,6 +189,36 @@ def run_generate(args) -> list[Path]:
                     stage.path(f"{within}agent.mp4"),
                 )
     return stage.files
+
+
+def _reference_motion(source: Path, model):
+    """The limb rotations ``(T, 9, 6)`` of ``--style-from``: a conversation's path stem or a
+    ``motion.npz`` that ``generate`` wrote; refused for a model that does not read one."""
+    import numpy as np
+
+    from data_synth import load_conversation
+
+    if not callable(getattr(model, "reference_code", None)):
+        raise CommandError(
+            f"a {type(model).__name__} does not take its style from a reference motion; drop "
+            "--style-from (it is for a styleflow run)"
+        )
+    if source.suffix == ".npz":
+        try:
+            with np.load(source) as motion:
+                return np.asarray(motion["rotations"])
+        except FileNotFoundError:
+            raise CommandError(f"--style-from {source}: no such file") from None
+        except (KeyError, ValueError, OSError) as error:
+            raise CommandError(
+                f"--style-from {source} is not a motion.npz with limb rotations ({error})"
+            ) from None
+    if not Path(f"{source}.npz").exists():
+        raise CommandError(
+            f"--style-from {source}: neither a motion.npz nor a conversation's path stem "
+            f"(no {source}.npz)"
+        )
+    return load_conversation(source).rotations
 
 
 def _set_sampling(model, args) -> None:
@@ -570,6 +602,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     generate.add_argument(
         "--style", nargs="+", metavar="NAME=PERCENTILE", help="e.g. hand_height=85"
+    )
+    generate.add_argument(
+        "--style-from",
+        type=Path,
+        metavar="REF",
+        help="take the style of this motion: a conversation's path stem or a motion.npz "
+        "(styleflow only)",
     )
     generate.add_argument(
         "--steps", type=_at_least(1), help="denoising steps per chunk (diffusion only)"

@@ -159,6 +159,7 @@ def speech_to_motion(
     partner: np.ndarray | None = None,
     activity: np.ndarray | None = None,
     style: Mapping[str, float] | None = None,
+    style_from: np.ndarray | None = None,
     samples: int = 1,
     temperature: float | None = None,
     seed: int | None = 0,
@@ -177,6 +178,8 @@ def speech_to_motion(
             (:func:`~gesturelib.features.who_is_talking`).
         style: percentiles of the training values by style feature, e.g.
             ``{"hand_height": 85}`` (the others at their median), for a model with style inputs.
+        style_from: a reference motion's limb rotations ``(T, 9, 6)`` whose style to take, for a
+            model without style labels that reads one (:class:`~gesturelib.models.StyleFlow`).
         samples, temperature, seed, progress: as for :func:`gesturelib.sampling.generate`.
     Returns:
         The :class:`Motion`.
@@ -198,6 +201,7 @@ def speech_to_motion(
         temperature=temperature,
         seed=seed,
         style=style_values,
+        style_from=style_from,
         progress=progress,
     )
     return Motion(rotations, forward_kinematics(rotations), activity, audio, sample_rate)

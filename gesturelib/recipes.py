@@ -3,24 +3,28 @@
 One recipe per trainable model, used by ``python -m gesturelib train MODEL`` and by the chapters
 that train the same model, so that a model is the same wherever it is trained:
 
-==================  ======================  ==========================================================
-name                model                   trained on
-==================  ======================  ==========================================================
-``moglow``          :class:`MoGlow`         4 s excerpts (teacher forcing), built with the normaliser
-``flowvae``         :class:`FlowVAE`        4 s excerpts, as MoGlow
-``flowvae_elbo``    the variational         4 s excerpts, built with the normaliser
-                    Flow-VAE
-``cvae``            :class:`CVAE`           2 s excerpts
-``aud2pose``        :class:`Aud2Pose`       single frames with their speech windows
-``motion_dae``      the denoising            excerpts of 1 s (its frames independent); stage 1 of
-                    autoencoder             ``aud2repr2pose``
-``aud2repr2pose``   :class:`Aud2Repr2Pose`  single frames; built around a trained ``motion_dae``
-``imputation_dae``  the denoising            excerpts of 1 s, cut into windows of 5 poses: the
-                    autoencoder of the      Flow-VAE paper's filler of lost limbs
-                    Flow-VAE paper
-``diffusion``       the diffusion model     chunks of 0.4 s, with the poses before and the speech
-                                            around them
-==================  ======================  ==========================================================
+====================  ======================  ==========================================================
+name                  model                   trained on
+====================  ======================  ==========================================================
+``moglow``            :class:`MoGlow`         4 s excerpts (teacher forcing), built with the normaliser
+``flowvae``           :class:`FlowVAE`        4 s excerpts, as MoGlow
+``flowvae_elbo``      the variational         4 s excerpts, built with the normaliser
+                      Flow-VAE
+``cvae``              :class:`CVAE`           2 s excerpts
+``aud2pose``          :class:`Aud2Pose`       single frames with their speech windows
+``motion_dae``        the denoising           excerpts of 1 s (its frames independent); stage 1 of
+                      autoencoder             ``aud2repr2pose``
+``aud2repr2pose``     :class:`Aud2Repr2Pose`  single frames; built around a trained ``motion_dae``
+``imputation_dae``    the denoising           excerpts of 1 s, cut into windows of 5 poses: the
+                      autoencoder of the      Flow-VAE paper's filler of lost limbs
+                      Flow-VAE paper
+``gesture_features``  the perceptual loss's   excerpts of 1.28 s; stage 1 of ``styleflow``
+                      motion autoencoder
+``styleflow``         :class:`StyleFlow`      4 s excerpts with 2 s of past poses, built around a
+                                              trained ``gesture_features``
+``diffusion``         the diffusion model     chunks of 0.4 s, with the poses before and the speech
+                                              around them
+====================  ======================  ==========================================================
 """
 
 from __future__ import annotations
@@ -44,10 +48,14 @@ from gesturelib.models import (
     FlowVAE,
     FlowVAEConfig,
     GestureDiffusion,
+    GestureFeatureConfig,
+    GestureFeatureNetwork,
     MoGlow,
     MoGlowConfig,
     MotionDAEConfig,
     MotionDenoisingAutoencoder,
+    StyleFlow,
+    StyleFlowConfig,
     VariationalFlowVAE,
     VariationalFlowVAEConfig,
 )
@@ -200,6 +208,26 @@ RECIPES: dict[str, Recipe] = {
         MotionDAEConfig.taylor(hidden_sizes=(32, 16), representation_dim=12),
         TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5, drop_last=True),
         TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=50, drop_last=True),
+    ),
+    "gesture_features": Recipe(
+        GestureFeatureNetwork,
+        WindowConfig(sequence_length=32, stride=8, past_poses=0),
+        WindowConfig(sequence_length=32, stride=8, past_poses=0),
+        GestureFeatureConfig(),
+        GestureFeatureConfig.quick(),
+        TrainConfig(epochs=15, batch_size=32, warmup_steps=200, patience=5),
+        TrainConfig.quick(epochs=5, batch_size=16, warmup_steps=50),
+    ),
+    "styleflow": Recipe(
+        StyleFlow,
+        _EXCERPTS,
+        _QUICK_EXCERPTS,
+        StyleFlowConfig(),
+        StyleFlowConfig.quick(),
+        _FLOW_TRAINING,
+        _QUICK_FLOW_TRAINING,
+        stage_one="gesture_features",
+        build=lambda config, normaliser, features: StyleFlow(config, normaliser, features),
     ),
     "diffusion": Recipe(
         GestureDiffusion,

@@ -77,6 +77,9 @@ class Stream:
         overlap: for a model that writes chunks, the frames by which one chunk overlaps the
             next, cross-faded (module docstring); None for half a chunk, 0 for chunks laid end
             to end.
+        style_from: a reference motion's limb rotations ``(T, 9, 6)`` whose style to take, for a
+            model that reads it (``model.reference_code``, Ye et al.'s flow); None: the model's
+            own history sets it.
     """
 
     def __init__(
@@ -89,6 +92,7 @@ class Stream:
         seed=None,
         style=None,
         overlap=None,
+        style_from=None,
     ):
         if not callable(getattr(model, "step", None)) or not hasattr(model, "config"):
             raise TypeError(
@@ -145,6 +149,16 @@ class Stream:
             raw = normaliser.style_at_percentiles({}) if style is None else _checked_style(style)
             _check_style_range(raw, normaliser)
             self.style = tensor(normaliser.normalise_style(raw)).expand(samples, 1, -1)
+        self.reference_code = None
+        if style_from is not None:
+            if not callable(getattr(model, "reference_code", None)):
+                raise ValueError(
+                    f"a {type(model).__name__} does not take its style from a reference motion; "
+                    "pass style_from=None"
+                )
+            reference = _checked_reference(style_from)
+            poses = tensor(normaliser.normalise_pose(reference.reshape(len(reference), -1)))
+            self.reference_code = model.reference_code(poses).expand(samples, 1, -1)
 
     def push(self, speech: np.ndarray, activity: np.ndarray) -> np.ndarray:
         """Add frames of speech; return the poses that can now be generated.
@@ -215,6 +229,8 @@ class Stream:
                 }
                 if self.style is not None:
                     frame["style"] = self.style
+                if self.reference_code is not None:
+                    frame["reference_code"] = self.reference_code
                 pose, self.state = self.model.step(frame, self.state, self._noise())
                 if not torch.isfinite(pose).all():
                     raise NonFiniteMotionError(
@@ -282,7 +298,8 @@ def generate(model, normaliser, speech, activity, progress: bool = False, **opti
             agent speak or listen where it did not.
         progress: show a progress bar (the speech is then pushed a minute at a time; the motion
             is the same).
-        options: ``samples``, ``temperature``, ``seed``, ``style`` of :class:`Stream`.
+        options: ``samples``, ``temperature``, ``seed``, ``style``, ``overlap``, ``style_from``
+            of :class:`Stream`.
     """
     from tqdm.auto import tqdm
 
@@ -330,6 +347,19 @@ def _check_speech(speech: np.ndarray) -> None:
             "spectrogram, not speech features (whose silence reads 0); pass "
             "gesturelib.features.speech_features(audio, sample_rate)"
         )
+
+
+def _checked_reference(rotations) -> np.ndarray:
+    """A reference motion as finite limb rotations ``(T, 9, 6)`` float64, or a ValueError."""
+    reference = np.asarray(rotations, dtype=np.float64)
+    if reference.ndim != 3 or reference.shape[1:] != (NUM_JOINTS, 6) or len(reference) < 1:
+        raise ValueError(
+            f"style_from must be a motion's limb rotations (T, {NUM_JOINTS}, 6), got shape "
+            f"{reference.shape}"
+        )
+    if not np.isfinite(reference).all():
+        raise ValueError("style_from holds NaN or infinite rotations")
+    return reference
 
 
 def _checked_style(style) -> np.ndarray:

@@ -14,6 +14,9 @@ rebuilds it (``Model.config_class``). Configs have working defaults for the cour
 * :mod:`~gesturelib.models.flowvae`: :class:`FlowVAE`, the conditional Flow-VAE of Taylor et al.,
   and :class:`VariationalFlowVAE`, its variant whose loss is an ELBO.
 * :mod:`~gesturelib.models.control`: the control those flows are conditioned on.
+* :mod:`~gesturelib.models.styleflow`: :class:`StyleFlow`, Ye et al.'s flow with a global
+  encoder, whose style follows a reference motion, and :class:`GestureFeatureNetwork`, the motion
+  autoencoder of its perceptual loss.
 * :mod:`~gesturelib.models.diffusion`: :class:`GestureDiffusion`, a denoising diffusion model
   writing short chunks of poses.
 """
@@ -35,6 +38,12 @@ from gesturelib.models.flowvae import (
     VariationalFlowVAEConfig,
 )
 from gesturelib.models.moglow import MoGlow, MoGlowConfig
+from gesturelib.models.styleflow import (
+    GestureFeatureConfig,
+    GestureFeatureNetwork,
+    StyleFlow,
+    StyleFlowConfig,
+)
 from gesturelib.models.vae import (
     CVAE,
     CVAEConfig,
@@ -57,6 +66,8 @@ __all__ = [
     "FlowVAE",
     "FlowVAEConfig",
     "GestureDiffusion",
+    "GestureFeatureConfig",
+    "GestureFeatureNetwork",
     "MoGlow",
     "MoGlowConfig",
     "MotionDAEConfig",
@@ -67,6 +78,8 @@ __all__ = [
     "PoseVAEConfig",
     "Sampling",
     "SpeechWindowNet",
+    "StyleFlow",
+    "StyleFlowConfig",
     "VariationalFlowVAE",
     "VariationalFlowVAEConfig",
     "gaussian_kl",
