@@ -192,33 +192,36 @@ def run_generate(args) -> list[Path]:
 
 
 def _reference_motion(source: Path, model):
-    """The limb rotations ``(T, 9, 6)`` of ``--style-from``: a conversation's path stem or a
-    ``motion.npz`` that ``generate`` wrote; refused for a model that does not read one."""
-    import numpy as np
-
+    """The recording of ``--style-from``: a conversation's path stem, its motion and its speech;
+    refused for a model that cannot take a reference's style."""
     from data_synth import load_conversation
+    from gesturelib.conventions import FPS
 
-    if not callable(getattr(model, "reference_code", None)):
+    if not callable(getattr(model, "latents", None)):
         raise CommandError(
-            f"a {type(model).__name__} does not take its style from a reference motion; drop "
-            "--style-from (it is for a styleflow run)"
+            f"a {type(model).__name__} does not take its style from a reference; drop "
+            "--style-from (it is for moglow and styleflow runs)"
         )
-    if source.suffix == ".npz":
-        try:
-            with np.load(source) as motion:
-                return np.asarray(motion["rotations"])
-        except FileNotFoundError:
-            raise CommandError(f"--style-from {source}: no such file") from None
-        except (KeyError, ValueError, OSError) as error:
-            raise CommandError(
-                f"--style-from {source} is not a motion.npz with limb rotations ({error})"
-            ) from None
-    if not Path(f"{source}.npz").exists():
+    if source.suffix in (".npz", ".wav", ".json"):
         raise CommandError(
-            f"--style-from {source}: neither a motion.npz nor a conversation's path stem "
-            f"(no {source}.npz)"
+            f"--style-from takes a conversation's path stem (its motion and its speech, which "
+            f"the style is read with), without {source.suffix}: --style-from "
+            f"{source.with_suffix('')}"
         )
-    return load_conversation(source).rotations
+    if not Path(f"{source}.npz").exists() or not Path(f"{source}.wav").exists():
+        raise CommandError(
+            f"--style-from {source}: not a conversation's path stem (needs {source}.npz and "
+            f"{source}.wav)"
+        )
+    reference = load_conversation(source)
+    config = model.config
+    needed = max(config.past_poses, config.speech_past) + config.speech_future + 1
+    if len(reference.rotations) < needed:
+        raise CommandError(
+            f"--style-from {source} is {len(reference.rotations)} frames long; this model reads "
+            f"a reference of at least {needed} frames ({needed / FPS:.1f} s)"
+        )
+    return reference
 
 
 def _set_sampling(model, args) -> None:
@@ -607,8 +610,8 @@ def _parser() -> argparse.ArgumentParser:
         "--style-from",
         type=Path,
         metavar="REF",
-        help="take the style of this motion: a conversation's path stem or a motion.npz "
-        "(styleflow only)",
+        help="take the style of this conversation (its path stem: motion and speech; "
+        "moglow and styleflow)",
     )
     generate.add_argument(
         "--steps", type=_at_least(1), help="denoising steps per chunk (diffusion only)"

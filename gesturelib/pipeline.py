@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from torch import nn
 
-from gesturelib.data import Normaliser, make_datasets
+from gesturelib.data import ConversationLike, Normaliser, make_datasets
 from gesturelib.features import mix_voices, speech_features, who_is_talking
 from gesturelib.history import History
 from gesturelib.recipes import RECIPES
@@ -159,7 +159,7 @@ def speech_to_motion(
     partner: np.ndarray | None = None,
     activity: np.ndarray | None = None,
     style: Mapping[str, float] | None = None,
-    style_from: np.ndarray | None = None,
+    style_from: ConversationLike | None = None,
     samples: int = 1,
     temperature: float | None = None,
     seed: int | None = 0,
@@ -178,8 +178,8 @@ def speech_to_motion(
             (:func:`~gesturelib.features.who_is_talking`).
         style: percentiles of the training values by style feature, e.g.
             ``{"hand_height": 85}`` (the others at their median), for a model with style inputs.
-        style_from: a reference motion's limb rotations ``(T, 9, 6)`` whose style to take, for a
-            model without style labels that reads one (:class:`~gesturelib.models.StyleFlow`).
+        style_from: a reference recording (a conversation: its motion and its speech) whose
+            style to take, for MoGlow or Ye et al.'s flow (:class:`~gesturelib.sampling.Stream`).
         samples, temperature, seed, progress: as for :func:`gesturelib.sampling.generate`.
     Returns:
         The :class:`Motion`.

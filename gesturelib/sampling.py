@@ -77,9 +77,15 @@ class Stream:
         overlap: for a model that writes chunks, the frames by which one chunk overlaps the
             next, cross-faded (module docstring); None for half a chunk, 0 for chunks laid end
             to end.
-        style_from: a reference motion's limb rotations ``(T, 9, 6)`` whose style to take, for a
-            model that reads it (``model.reference_code``, Ye et al.'s flow); None: the model's
-            own history sets it.
+        style_from: a reference recording whose style to take (a conversation, or anything
+            with its ``rotations``, ``audio``, ``sample_rate``, ``fps`` and ``activity``), for a
+            recurrent flow (MoGlow, Ye et al.'s flow): the base codes of its motion read with its
+            own speech (:func:`reference_latents`) are replayed instead of fresh draws, sample
+            ``k`` of ``K`` from ``k / K`` of the way in, from the start again at their end;
+            the temperature scales them. None: draw the noise.
+        style_code: ``(global_size,)`` a style code from ``model.reference_code`` (Ye et al.'s
+            flow) held at every frame in place of the one of the model's own history; None:
+            its own history sets it.
     """
 
     def __init__(
@@ -93,6 +99,7 @@ class Stream:
         style=None,
         overlap=None,
         style_from=None,
+        style_code=None,
     ):
         if not callable(getattr(model, "step", None)) or not hasattr(model, "config"):
             raise TypeError(
@@ -149,16 +156,21 @@ class Stream:
             raw = normaliser.style_at_percentiles({}) if style is None else _checked_style(style)
             _check_style_range(raw, normaliser)
             self.style = tensor(normaliser.normalise_style(raw)).expand(samples, 1, -1)
-        self.reference_code = None
+        self.latents, self.replayed = None, None
         if style_from is not None:
-            if not callable(getattr(model, "reference_code", None)):
+            self.latents = tensor(reference_latents(model, normaliser, style_from))
+            # Where each sample starts reading the reference's codes: spread over them.
+            self.replayed = [k * len(self.latents) // samples for k in range(samples)]
+        self.style_code = None
+        if style_code is not None:
+            size = getattr(config, "global_size", 0)
+            code = tensor(style_code).reshape(-1)
+            if not size or code.shape != (size,) or not torch.isfinite(code).all():
                 raise ValueError(
-                    f"a {type(model).__name__} does not take its style from a reference motion; "
-                    "pass style_from=None"
+                    f"style_code must be {size or 'no'} finite numbers from the model's "
+                    f"reference_code() (a StyleFlow with a global encoder), got {tuple(code.shape)}"
                 )
-            reference = _checked_reference(style_from)
-            poses = tensor(normaliser.normalise_pose(reference.reshape(len(reference), -1)))
-            self.reference_code = model.reference_code(poses).expand(samples, 1, -1)
+            self.style_code = code.expand(samples, 1, -1)
 
     def push(self, speech: np.ndarray, activity: np.ndarray) -> np.ndarray:
         """Add frames of speech; return the poses that can now be generated.
@@ -229,8 +241,8 @@ class Stream:
                 }
                 if self.style is not None:
                     frame["style"] = self.style
-                if self.reference_code is not None:
-                    frame["reference_code"] = self.reference_code
+                if self.style_code is not None:
+                    frame["reference_code"] = self.style_code
                 pose, self.state = self.model.step(frame, self.state, self._noise())
                 if not torch.isfinite(pose).all():
                     raise NonFiniteMotionError(
@@ -274,6 +286,10 @@ class Stream:
 
     def _noise(self) -> torch.Tensor:
         dim = getattr(self.model, "noise_dim", 0)
+        if self.latents is not None:
+            rows = [position % len(self.latents) for position in self.replayed]
+            self.replayed = [position + 1 for position in self.replayed]
+            return self.temperature * self.latents[rows]
         if self.temperature == 0 or dim == 0:
             return torch.zeros(self.samples, dim, device=self.device)
         if isinstance(self.generators, list):
@@ -298,8 +314,8 @@ def generate(model, normaliser, speech, activity, progress: bool = False, **opti
             agent speak or listen where it did not.
         progress: show a progress bar (the speech is then pushed a minute at a time; the motion
             is the same).
-        options: ``samples``, ``temperature``, ``seed``, ``style``, ``overlap``, ``style_from``
-            of :class:`Stream`.
+        options: ``samples``, ``temperature``, ``seed``, ``style``, ``overlap``, ``style_from``,
+            ``style_code`` of :class:`Stream`.
     """
     from tqdm.auto import tqdm
 
@@ -315,6 +331,48 @@ def generate(model, normaliser, speech, activity, progress: bool = False, **opti
             parts.append(stream.push(speech[start : start + step], activity[start : start + step]))
             bar.update(len(speech[start : start + step]))
     return np.concatenate([*parts, stream.finish()], axis=1)
+
+
+def reference_latents(model, normaliser, reference) -> np.ndarray:
+    """The base codes of a reference recording's motion, read through the flow with its own
+    speech and who is talking (teacher forcing): Ye et al.'s style transfer (their section 4.5).
+    Replayed with other speech (:class:`Stream`'s ``style_from``), they carry what the flow
+    could not explain by the control: where the hands hover, how wide and fast they move.
+
+    Args:
+        model, normaliser: a recurrent flow over poses (``model.latents``: MoGlow, Ye et al.'s
+            flow) and its normaliser.
+        reference: a recording with ``rotations (T, 9, 6)``, ``audio``, ``sample_rate``,
+            ``fps`` and ``activity (T,)`` (a conversation; an imported take).
+    Returns:
+        ``(N, 54)`` float32, one per frame that has its whole control: ``N = T - max(past
+        poses, past speech) - speech_future``.
+    Raises:
+        ValueError: a model without base codes, or a reference too short or malformed (from
+            :meth:`~gesturelib.data.ConversationFeatures.from_conversation`).
+    """
+    from gesturelib.data import ConversationFeatures, WindowConfig, WindowDataset
+
+    if not callable(getattr(model, "latents", None)):
+        raise ValueError(
+            f"a {type(model).__name__} has no base codes to take a reference's style from; "
+            "style_from is for MoGlow and Ye et al.'s flow"
+        )
+    features = ConversationFeatures.from_conversation(reference, len(normaliser.speech_mean))
+    config = model.config
+    context = {"speech_past": config.speech_past, "speech_future": config.speech_future}
+    frames = len(features.pose) - max(config.past_poses, config.speech_past) - config.speech_future
+    if frames < 1:
+        needed = len(features.pose) - frames + 1
+        raise ValueError(
+            f"a style reference must be at least {needed} frames ({needed / FPS:.1f} s) long for "
+            f"this model, got {len(features.pose)}"
+        )
+    windows = WindowConfig(past_poses=config.past_poses, sequence_length=frames, **context)
+    batch = WindowDataset([features], windows, normaliser)[0]
+    device = device_of(model)
+    batch = {name: value[None].to(device) for name, value in batch.items()}
+    return model.latents(batch)[0].cpu().numpy()
 
 
 #: Frames pushed at once when generation shows its progress: a minute of speech.
@@ -347,19 +405,6 @@ def _check_speech(speech: np.ndarray) -> None:
             "spectrogram, not speech features (whose silence reads 0); pass "
             "gesturelib.features.speech_features(audio, sample_rate)"
         )
-
-
-def _checked_reference(rotations) -> np.ndarray:
-    """A reference motion as finite limb rotations ``(T, 9, 6)`` float64, or a ValueError."""
-    reference = np.asarray(rotations, dtype=np.float64)
-    if reference.ndim != 3 or reference.shape[1:] != (NUM_JOINTS, 6) or len(reference) < 1:
-        raise ValueError(
-            f"style_from must be a motion's limb rotations (T, {NUM_JOINTS}, 6), got shape "
-            f"{reference.shape}"
-        )
-    if not np.isfinite(reference).all():
-        raise ValueError("style_from holds NaN or infinite rotations")
-    return reference
 
 
 def _checked_style(style) -> np.ndarray:

@@ -71,3 +71,22 @@ def trained_looking():
         return model.eval()
 
     return make
+
+
+@pytest.fixture(scope="session")
+def step_through():
+    """A function ``(model, batch, z, **extra) -> (B, L, D)``: the model's ``step`` on each frame
+    of ``batch`` (its control, ``L = 1`` at a time, with ``extra`` entries added) for the noise
+    ``z`` ``(B, L, noise_dim)``, the state carried: generation frame by frame, to compare with
+    what the whole sequence gives."""
+
+    def run(model, batch, z, **extra):
+        state, frames = None, []
+        with model.generating():
+            for t in range(z.shape[1]):
+                frame = {name: part[:, t : t + 1] for name, part in batch.items()}
+                pose, state = model.step({**frame, **extra}, state, z[:, t])
+                frames.append(pose)
+        return torch.stack(frames, dim=1)
+
+    return run

@@ -86,7 +86,7 @@ def identity_flow(model):
     ],
     ids=["paper", "elbo", "residual", "leak", "elbo-leak", "recipe"],
 )
-def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config):
+def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config, step_through):
     _, normaliser, batch, _ = data
     model = build(config, normaliser, batch).double()
     batch = {name: part.double() for name, part in batch.items()}
@@ -100,12 +100,7 @@ def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config):
     torch.testing.assert_close(total, log_prob)
     z = torch.randn(latent.shape, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
     drawn, _, _ = model.flow.inverse(z, cond)
-    state, frames = None, []
-    with model.generating():
-        for t in range(z.shape[1]):
-            frame = {name: part[:, t : t + 1] for name, part in batch.items()}
-            pose, state = model.step(frame, state, z[:, t])
-            frames.append(pose)
+    stepped = step_through(model, batch, z)
     # A residual model adds each change to the last generated latent moved `leak` of the way
     # to the mean pose's, starting from the encoding of the past pose before the first frame.
     latents = drawn
@@ -117,7 +112,7 @@ def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config):
             last = drawn[:, t : t + 1] + last - config.leak * (last - rest)
             steps.append(last)
         latents = torch.cat(steps, dim=1)
-    torch.testing.assert_close(torch.stack(frames, dim=1), model.decode(latents))
+    torch.testing.assert_close(stepped, model.decode(latents))
 
 
 @pytest.mark.parametrize("residual, leak", [(False, 0.0), (True, 0.0), (True, 0.3)])

@@ -37,7 +37,9 @@ def test_a_whole_sequence_inverts_and_its_logdet_is_the_jacobians(data, trained_
     torch.testing.assert_close(torch.linalg.slogdet(matrix)[1], logdet[0], atol=1e-8, rtol=1e-8)
 
 
-def test_teacher_forcing_and_frame_by_frame_agree_on_likelihood_and_samples(data, trained_looking):
+def test_teacher_forcing_and_frame_by_frame_agree_on_likelihood_and_samples(
+    data, trained_looking, step_through
+):
     _, normaliser, batch = data
     model = trained_looking(SMALL, normaliser, batch).double()
     batch = {name: part.double() for name, part in batch.items()}
@@ -54,17 +56,25 @@ def test_teacher_forcing_and_frame_by_frame_agree_on_likelihood_and_samples(data
         batch["pose"].shape, dtype=torch.float64, generator=torch.Generator().manual_seed(1)
     )
     whole, _, _ = model.flow.inverse(z, cond)
-    state, frames = None, []
-    with model.generating():
-        for t in range(z.shape[1]):
-            frame = {name: part[:, t : t + 1] for name, part in batch.items()}
-            pose, state = model.step(frame, state, z[:, t])
-            frames.append(pose)
+    stepped = step_through(model, batch, z)
     last = batch["past_pose"][:, :, -1]  # a residual MoGlow's poses are changes from the last one
-    torch.testing.assert_close(torch.stack(frames, dim=1), whole + last)
+    torch.testing.assert_close(stepped, whole + last)
 
 
-def test_a_residual_moglow_models_the_change_from_the_last_pose(data, trained_looking):
+def test_a_sequences_latents_step_back_to_its_poses(data, trained_looking, step_through):
+    """latents() inverts step(): the base codes of poses, read with their control, give them back
+    frame by frame (what a style reference's replayed codes rest on)."""
+    _, normaliser, batch = data
+    model = trained_looking(SMALL, normaliser, batch).double()
+    batch = {name: part.double() for name, part in batch.items()}
+    z = model.latents(batch)
+    stepped = step_through(model, batch, z)
+    torch.testing.assert_close(stepped, batch["pose"])
+
+
+def test_a_residual_moglow_models_the_change_from_the_last_pose(
+    data, trained_looking, step_through
+):
     _, normaliser, batch = data
     config = dataclasses.replace(SMALL, residual=True, pose_noise=0.0)
     model = trained_looking(config, normaliser, batch).double()
@@ -74,13 +84,8 @@ def test_a_residual_moglow_models_the_change_from_the_last_pose(data, trained_lo
     torch.testing.assert_close(model.loss(batch)["nll"], -log_prob.mean() / last.shape[1])
     z = torch.randn(last.shape, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
     whole, _, _ = model.flow.inverse(z, cond)
-    state, frames = None, []
-    with model.generating():
-        for t in range(z.shape[1]):
-            frame = {name: part[:, t : t + 1] for name, part in batch.items()}
-            pose, state = model.step(frame, state, z[:, t])
-            frames.append(pose)
-    torch.testing.assert_close(torch.stack(frames, dim=1), whole + last)
+    stepped = step_through(model, batch, z)
+    torch.testing.assert_close(stepped, whole + last)
     with pytest.raises(ValueError, match="past_poses >= 1"):
         MoGlowConfig(residual=True, past_poses=0)
 

@@ -1,5 +1,6 @@
 """Ye et al.'s flow: the global encoder, the loss's terms, generation frame by frame against the
-whole sequence, the style code of a reference motion, and its front doors."""
+whole sequence, the style code of a reference motion, a reference's latent codes replayed, and
+its front doors."""
 
 import dataclasses
 
@@ -63,7 +64,7 @@ def test_the_flow_inverts_and_its_logdet_is_the_jacobians(data):
     torch.testing.assert_close(torch.linalg.slogdet(matrix)[1], logdet[0])
 
 
-def test_generating_frame_by_frame_gives_the_decoded_sequence(data):
+def test_generating_frame_by_frame_gives_the_decoded_sequence(data, step_through):
     """step() on each frame's control, with the style code of the first frame's history, gives
     f^-1(z; c, g) + the last pose, as the loss decodes the whole excerpt."""
     _, normaliser, batch = data
@@ -71,13 +72,8 @@ def test_generating_frame_by_frame_gives_the_decoded_sequence(data):
     z = torch.randn(batch["pose"].shape, dtype=torch.float64, generator=torch.Generator())
     whole = model.flow.inverse(z, model.conditioning(batch))[0] + batch["past_pose"][:, :, -1]
     code = torch.cat([model.reference_code(history) for history in batch["past_pose"][:, 0]])
-    state, frames = None, []
-    with model.generating():
-        for t in range(z.shape[1]):
-            frame = {name: part[:, t : t + 1] for name, part in batch.items()}
-            pose, state = model.step({**frame, "reference_code": code}, state, z[:, t])
-            frames.append(pose)
-    torch.testing.assert_close(torch.stack(frames, dim=1), whole)
+    stepped = step_through(model, batch, z, reference_code=code)
+    torch.testing.assert_close(stepped, whole)
 
 
 def test_the_style_code_comes_from_the_first_frames_history_and_the_control_from_five_poses(
@@ -182,28 +178,76 @@ def test_configs_refuse_labels_and_too_short_a_history():
     assert Config(features={"channels": 8, "features": 4}).features == GestureFeatureConfig(8, 4)
 
 
-def test_a_stream_takes_the_style_of_a_reference_and_refuses_bad_ones(data):
+def test_stepping_a_references_latents_gives_back_its_poses(data, step_through):
+    """latents() is what step() inverts: with the reference's own control (and the style code
+    of its first frame's history, held as in training), frame by frame, its base codes give back
+    its poses (Ye et al.'s transfer replays them with other speech)."""
+    _, normaliser, batch = data
+    model = random_model(SMALL, normaliser, batch)
+    z = model.latents(batch)
+    assert z.shape == batch["pose"].shape
+    code = torch.cat([model.reference_code(history) for history in batch["past_pose"][:, 0]])
+    stepped = step_through(model, batch, z, reference_code=code)
+    torch.testing.assert_close(stepped, batch["pose"])
+
+
+def test_a_stream_replays_a_references_latents_and_refuses_what_cannot(data):
+    from gesturelib.models import Aud2Pose, Aud2PoseConfig
+    from gesturelib.sampling import reference_latents
+
+    conversation, normaliser, batch = data
+    model = random_model(SMALL, normaliser, batch).float()
+    latents = reference_latents(model, normaliser, conversation)
+    assert latents.shape == (len(conversation.rotations) - 18 - 9, 54)
+    speech = np.zeros((30, 27), dtype=np.float32)
+    activity = np.zeros(30, dtype=np.int64)
+
+    def motion(**options):
+        stream = Stream(model, normaliser, seed=0, samples=2, **options)
+        return np.concatenate([stream.push(speech, activity), stream.finish()], axis=1)
+
+    own, replayed = motion(), motion(style_from=conversation)
+    assert not np.allclose(own, replayed)
+    np.testing.assert_array_equal(replayed, motion(style_from=conversation))  # no draws
+    assert not np.allclose(replayed[0], replayed[1])  # each sample from its own offset
+    np.testing.assert_allclose(
+        motion(style_from=conversation, temperature=0), motion(temperature=0)
+    )
+    short = dataclasses.replace(
+        conversation,
+        rotations=conversation.rotations[:20],
+        activity=conversation.activity[:20],
+        audio=conversation.audio[: 20 * conversation.sample_rate // conversation.fps],
+    )
+    with pytest.raises(ValueError, match="at least 28 frames"):
+        reference_latents(model, normaliser, short)
+    regressor = Aud2Pose(Aud2PoseConfig.quick())
+    with pytest.raises(ValueError, match="no base codes"):
+        reference_latents(regressor, normaliser, conversation)
+
+
+def test_a_stream_holds_a_style_code_and_refuses_a_wrong_one(data):
     conversation, normaliser, batch = data
     model = random_model(SMALL, normaliser, batch).float()
     speech = np.zeros((30, 27), dtype=np.float32)
     activity = np.zeros(30, dtype=np.int64)
     outputs = {}
-    for name, reference in (
-        ("own", None),
-        ("first", conversation.rotations[:50]),
-        ("last", conversation.rotations[-50:]),
-    ):
-        stream = Stream(model, normaliser, seed=0, style_from=reference)
+    for name, frames in (("own", None), ("first", slice(0, 50)), ("last", slice(-50, None))):
+        code = None
+        if frames is not None:
+            poses = normaliser.normalise_pose(conversation.rotations[frames].reshape(50, 54))
+            code = model.reference_code(torch.tensor(poses, dtype=torch.float32))
+        stream = Stream(model, normaliser, seed=0, style_code=code)
         outputs[name] = np.concatenate([stream.push(speech, activity), stream.finish()], axis=1)
     assert not np.allclose(outputs["first"], outputs["own"])
     assert not np.allclose(outputs["first"], outputs["last"])
-    with pytest.raises(ValueError, match=r"\(T, 9, 6\)"):
-        Stream(model, normaliser, style_from=conversation.positions)
-    with pytest.raises(ValueError, match="NaN"):
-        Stream(model, normaliser, style_from=np.full((10, 9, 6), np.nan))
+    with pytest.raises(ValueError, match="style_code must be 4 finite numbers"):
+        Stream(model, normaliser, style_code=np.zeros(3))
+    with pytest.raises(ValueError, match="style_code must be 4 finite numbers"):
+        Stream(model, normaliser, style_code=np.full(4, np.nan))
 
 
-def test_generate_style_from_takes_a_conversation_or_a_motion_and_refuses_other_models(
+def test_generate_style_from_takes_a_conversation_for_both_flows_and_refuses_the_rest(
     tmp_path, tiny_data, moglow_run, capsys
 ):
     run = tmp_path / "styleflow"
@@ -211,27 +255,23 @@ def test_generate_style_from_takes_a_conversation_or_a_motion_and_refuses_other_
     reference = next((tiny_data / "train").glob("*.wav")).with_suffix("")
     speech = next((tiny_data / "test").glob("*.wav")).with_suffix("")
     common = ["--conversation", str(speech), "--no-video"]
-    out = tmp_path / "from-conversation"
-    assert (
-        main(["generate", str(run), *common, "--out", str(out), "--style-from", str(reference)])
-        == 0
-    )
-    again = tmp_path / "from-motion"
-    motion = str(out / "motion.npz")
-    assert main(["generate", str(run), *common, "--out", str(again), "--style-from", motion]) == 0
-    with np.load(out / "motion.npz") as first, np.load(again / "motion.npz") as second:
-        assert first["rotations"].shape == second["rotations"].shape
+    for name, trained in (("styleflow", run), ("moglow", moglow_run)):
+        out = tmp_path / f"{name}-styled"
+        args = ["generate", str(trained), *common, "--out", str(out)]
+        assert main([*args, "--style-from", str(reference)]) == 0
+        plain = tmp_path / f"{name}-plain"
+        assert main(["generate", str(trained), *common, "--out", str(plain)]) == 0
+        with np.load(out / "motion.npz") as styled, np.load(plain / "motion.npz") as own:
+            assert styled["rotations"].shape == own["rotations"].shape
+            assert not np.allclose(styled["rotations"], own["rotations"])
     capsys.readouterr()
     for source, message in (
-        (tmp_path / "nowhere", "neither a motion.npz nor a conversation"),
-        (tmp_path / "nowhere.npz", "no such file"),
+        (tmp_path / "nowhere", "not a conversation's path stem"),
+        (tmp_path / "styleflow-styled" / "motion.npz", "without .npz"),
     ):
         args = ["generate", str(run), *common, "--out", str(tmp_path / "x"), "--style-from"]
         assert main([*args, str(source)]) == 2
         assert message in capsys.readouterr().err
-    args = ["generate", str(moglow_run), *common, "--out", str(tmp_path / "y")]
-    assert main([*args, "--style-from", str(reference)]) == 2
-    assert "does not take its style from a reference" in capsys.readouterr().err
 
 
 def grid_pairs():
@@ -277,3 +317,48 @@ def test_clip_style_averages_the_style_features_over_the_clip(data):
     np.testing.assert_allclose(clip_style(conversation.positions), expected)
     raised = conversation.positions + np.array([0.0, 5.0, 0.0])  # every keypoint 5 cm higher
     assert clip_style(raised)[0] == pytest.approx(expected[0] + 5.0)
+
+
+def test_spanning_references_are_the_ends_of_each_features_range():
+    from types import SimpleNamespace
+
+    from gesturelib.evaluation.transfer import spanning_references
+    from gesturelib.skeleton import JOINT_INDEX
+
+    base = np.zeros((100, 9, 3))
+    base[:, :, 1] = 100.0
+    clips = []
+    for height in (0.0, 10.0, 20.0, 30.0):  # the right wrist's height alone differs
+        positions = base.copy()
+        positions[:, JOINT_INDEX["right_wrist"], 1] += height
+        clips.append(SimpleNamespace(positions=positions, height=height))
+    chosen = spanning_references(clips)
+    assert [c.height for c in chosen[:2]] == [0.0, 30.0]  # hand height: the lowest, the highest
+    assert len(chosen) == len({id(c) for c in chosen})  # each once
+
+
+def test_transfer_pairs_generate_every_pair_by_each_mechanism(data):
+    from gesturelib.evaluation.transfer import transfer_pairs
+
+    conversation, normaliser, batch = data
+    model = random_model(SMALL, normaliser, batch).float()
+    for by in ("latents", "style code"):
+        speakers, references, realised = transfer_pairs(
+            model, normaliser, [conversation], [conversation, conversation], seconds=2, by=by
+        )
+        assert speakers.shape == references.shape == realised.shape == (2, 4)
+        assert np.isfinite(realised).all()
+    from gesturelib.models import MoGlow, MoGlowConfig
+
+    config = MoGlowConfig.quick(speech_past=8, speech_future=9, steps=2, hidden=8, style=True)
+    torch.manual_seed(0)
+    labelled = MoGlow(config, normaliser)
+    window = {name: part.float() for name, part in batch.items()}
+    window["past_pose"] = window["past_pose"][:, :, -config.past_poses :]
+    labelled.loss(window)  # initialises ActNorm
+    pairs = transfer_pairs(
+        labelled.eval(), normaliser, [conversation], [conversation], 2, by="labels"
+    )
+    assert np.isfinite(pairs[2]).all()
+    with pytest.raises(ValueError, match="by must be one of"):
+        transfer_pairs(model, normaliser, [conversation], [conversation], by="copy")

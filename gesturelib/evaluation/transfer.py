@@ -64,41 +64,79 @@ def transfer_scores(
     return scores
 
 
+#: How a model may take a reference's style: its base codes replayed (any recurrent flow), Ye et
+#: al.'s global style code held (their flow only), or the reference's measured style given as
+#: labels (a model trained with style inputs).
+MECHANISMS = ("latents", "style code", "labels")
+
+
 def transfer_pairs(
-    model, normaliser, speakers: Sequence, references: Sequence, seconds: float = 20.0, seed=0
+    model,
+    normaliser,
+    speakers: Sequence,
+    references: Sequence,
+    seconds: float = 20.0,
+    seed=0,
+    by: str = "latents",
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Generate every pair: the first ``seconds`` of each speaker conversation's speech (and who
-    is talking) with each reference conversation's whole motion as ``style_from``.
+    is talking) with each reference conversation's style.
 
     Args:
-        model, normaliser: a model that takes a reference motion
-            (:class:`~gesturelib.models.StyleFlow`) and its normaliser.
+        model, normaliser: a model that takes a reference's style (MoGlow, Ye et al.'s flow)
+            and its normaliser.
         speakers, references: conversations (``audio``, ``sample_rate``, ``activity``,
             ``positions``, ``rotations``), e.g. held-out ones and training ones spanning the
-            styles.
+            styles (:func:`spanning_references`).
         seconds: of each speaker's speech.
         seed: of every sample (one per pair).
+        by: ``"latents"``: the reference's base codes replayed
+            (:class:`~gesturelib.sampling.Stream`'s ``style_from``); ``"style code"``: the global
+            encoder's code of the reference's poses held at every frame (``style_code``);
+            ``"labels"``: the reference's style (:func:`clip_style`) held as the style inputs.
     Returns:
         ``(speaker styles, reference styles, realised styles)``, each ``(P, 4)`` in the order
         speaker by speaker, reference by reference, for :func:`transfer_scores`.
     """
-    from gesturelib.pipeline import speech_to_motion
+    import torch
 
+    from gesturelib.features import speech_features
+    from gesturelib.sampling import generate
+    from gesturelib.skeleton import forward_kinematics
+
+    if by not in MECHANISMS:
+        raise ValueError(f"by must be one of {MECHANISMS}, got {by!r}")
+    options = []
+    for b in references:
+        if by == "latents":
+            options.append({"style_from": b})
+        elif by == "labels":
+            options.append({"style": clip_style(b.positions)})
+        else:
+            poses = normaliser.normalise_pose(b.rotations.reshape(len(b.rotations), -1))
+            code = model.reference_code(torch.as_tensor(poses, dtype=torch.float32))
+            options.append({"style_code": code})
     reference_styles = [clip_style(b.positions) for b in references]
     rows = []
     for a in speakers:
-        frames = min(len(a.activity), round(seconds * FPS))
-        audio = a.audio[: frames * a.sample_rate // FPS]
+        speech = speech_features(a.audio, a.sample_rate)[: round(seconds * FPS)]
         own = clip_style(a.positions)
-        for b, asked in zip(references, reference_styles, strict=True):
-            motion = speech_to_motion(
-                model,
-                normaliser,
-                audio,
-                a.sample_rate,
-                activity=a.activity[:frames],
-                style_from=b.rotations,
-                seed=seed,
+        for asked, option in zip(reference_styles, options, strict=True):
+            rotations = generate(
+                model, normaliser, speech, a.activity[: len(speech)], seed=seed, **option
             )
-            rows.append((own, asked, clip_style(motion.positions[0])))
+            rows.append((own, asked, clip_style(forward_kinematics(rotations[0]))))
     return tuple(np.array(column) for column in zip(*rows, strict=True))
+
+
+def spanning_references(conversations: Sequence) -> list:
+    """The conversations at the two ends of each style feature's range (each once, in the order
+    of :data:`~gesturelib.style.STYLE_FEATURES`, lowest first): references whose styles span
+    every feature, so that a slope can be fitted to each."""
+    styles = np.array([clip_style(c.positions) for c in conversations])
+    chosen = []
+    for k in range(len(STYLE_FEATURES)):
+        for index in (int(np.argmin(styles[:, k])), int(np.argmax(styles[:, k]))):
+            if index not in chosen:
+                chosen.append(index)
+    return [conversations[i] for i in chosen]

@@ -124,9 +124,21 @@ class MoGlow(nn.Module):
         # Fixed noise in evaluation, so that the validation loss is the same every time.
         generator = None if self.training else torch.Generator(pose.device).manual_seed(0)
         noisy = pose + self.noise(pose, generator) - self._origin(batch)
-        log_prob, _ = self.flow.log_prob(noisy, self.control(batch, drop_past=self.training))
+        log_prob, _ = self.flow.log_prob(noisy, self.conditioning(batch, drop_past=self.training))
         nll = -log_prob.mean() / pose.shape[1]
         return {"loss": nll, "nll": nll.detach()}
+
+    def conditioning(self, batch, drop_past: bool = False) -> torch.Tensor:
+        """What every coupling reads: the encoded control ``(B, L, encoded_size)``."""
+        return self.control(batch, drop_past=drop_past)
+
+    @torch.no_grad()
+    def latents(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The base codes ``z`` ``(B, L, 54)`` of the poses of ``batch`` (teacher forcing, no pose
+        noise): what :meth:`step` turns back into these poses with the same control."""
+        (pose,) = batch_parts(batch, {"pose": (POSE_DIM,)}, f"{type(self).__name__}.latents")
+        z, _, _ = self.flow(pose - self._origin(batch), self.conditioning(batch))
+        return z
 
     @property
     def noise_dim(self) -> int:
@@ -151,7 +163,7 @@ class MoGlow(nn.Module):
         Returns:
             ``(pose (B, 54), state)``.
         """
-        pose, _, state = self.flow.inverse(noise[:, None], self.control(frame), state)
+        pose, _, state = self.flow.inverse(noise[:, None], self.conditioning(frame), state)
         return (pose + self._origin(frame))[:, 0], state
 
     def _origin(self, batch) -> torch.Tensor | float:

@@ -28,12 +28,12 @@ untouched half of the pose:
   motion autoencoder, trained first on the training motion (:class:`GestureFeatureNetwork`),
   computes from ``x`` and ``x'``. ``global_size = 0`` or ``perceptual = 0`` are the paper's
   ablations.
-* **Style transfer** (:meth:`StyleFlow.reference_code`): the style code averaged over every 4 s
-  window of a reference motion replaces, at every frame, the one of the model's own history.
-  Measured so far, the trained flow ignores the code and the transfer moves no style: the
-  couplings' GRUs learn the style from the real past poses within an excerpt
-  (``docs/benchmarks.md``, where the paper's own transfer, by the reference's latent codes, does
-  move it).
+* **Style transfer.** The paper's: the reference's motion read through the flow with its own
+  speech gives base codes ``z_t`` (:meth:`~gesturelib.models.MoGlow.latents`), replayed with the
+  new speech (``Stream(style_from=...)``, ``generate --style-from``). The global encoder's own
+  route, :meth:`StyleFlow.reference_code` held at every frame (``Stream(style_code=...)``),
+  is measured to move no style: the couplings' GRUs learn the style from the real past poses
+  within an excerpt, so the flow ignores a code that says it again (``docs/benchmarks.md``).
 
 Deliberately not the paper's: a Gaussian base (the paper's Student's t makes training robust to
 outliers that our synthetic motion does not have), TCN blocks without batch normalisation (a
@@ -364,10 +364,3 @@ class StyleFlow(MoGlow):
             )
         codes = self.global_encoder.poses(reference[None], history)  # (1, T - H + 1, size)
         return codes.mean(dim=1, keepdim=True)
-
-    @torch.no_grad()
-    def step(self, frame: dict[str, torch.Tensor], state, noise: torch.Tensor):
-        """One frame of generation, as :meth:`MoGlow.step`; ``frame["reference_code"]``
-        ``(B, 1, global_size)``, if present, sets the style."""
-        pose, _, state = self.flow.inverse(noise[:, None], self.conditioning(frame), state)
-        return (pose + self._origin(frame))[:, 0], state
