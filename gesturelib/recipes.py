@@ -224,7 +224,8 @@ RECIPES: dict[str, Recipe] = {
         _QUICK_EXCERPTS,
         StyleFlowConfig(),
         StyleFlowConfig.quick(),
-        # A third of MoGlow's steps: its GRUs and decoded sample make a step three times dearer.
+        # A sixth of MoGlow's steps (a third of its epochs): its GRUs and decoded sample make a
+        # step several times dearer.
         TrainConfig(epochs=10, batch_size=32, warmup_steps=250, patience=4),
         _QUICK_FLOW_TRAINING,
         stage_one="gesture_features",
