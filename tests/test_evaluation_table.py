@@ -72,9 +72,12 @@ def test_a_row_is_the_mean_and_spread_over_every_draw_of_every_run(monkeypatch):
     # Diversity, one value per run (1 cm and 3 cm apart at every keypoint... along x, y, z):
     assert row["diversity"] == pytest.approx(2 * np.sqrt(3))
     assert row["diversity_sd"] == pytest.approx(np.std([np.sqrt(3), 3 * np.sqrt(3)], ddof=1))
+    assert np.isnan(row["transfer"])  # no model that replays a reference
     values = iter([1.0, np.nan])
-    row = score_system([None], [[[motion]], [[motion]]], deterministic=True)
+    row = score_system([None], [[[motion]], [[motion]]], deterministic=True, transfer=[0.2, 0.4])
     assert np.isnan(row["hellinger"]) and row["diversity"] == 0.0  # undefined once: undefined
+    assert row["transfer"] == pytest.approx(0.3)  # one value per run, like diversity
+    assert row["transfer_sd"] == pytest.approx(np.std([0.2, 0.4], ddof=1))
 
 
 def test_runs_of_several_seeds_share_a_row_named_by_their_folders():
@@ -126,6 +129,8 @@ def test_evaluate_writes_the_table_models_and_figures(tmp_path, moglow_run, tiny
     assert list(table) == [*REFERENCES, "moglow"]
     assert table["ground_truth"]["hellinger"] == 0 and table["moglow"]["seeds"] == 1
     assert np.isfinite(table["moglow"]["fgd"]) and table["floor"]["fgd"] < table["mean_pose"]["fgd"]
+    # One training conversation: no references spanning the styles, so no transfer slope.
+    assert np.isnan(table["moglow"]["transfer"]) and np.isnan(table["floor"]["transfer"])
     with open(out / "models.csv") as file:
         models = list(csv.DictReader(file))
     assert models[0]["system"] == "moglow" and int(models[0]["parameters"]) > 1000

@@ -337,6 +337,25 @@ def test_spanning_references_are_the_ends_of_each_features_range():
     assert len(chosen) == len({id(c) for c in chosen})  # each once
 
 
+def test_style_transfer_averages_the_slopes_by_latent_codes(data, monkeypatch):
+    from gesturelib.evaluation import transfer
+
+    conversation, normaliser, batch = data
+    one_style = {"train": [conversation], "test": [conversation]}
+    assert np.isnan(transfer.style_transfer(None, normaliser, one_style))  # no slope to fit
+    a, b = grid_pairs()
+    asked = {}
+
+    def halfway(model, normaliser, speakers, references, seconds, by):
+        asked.update(seconds=seconds, by=by, references=len(references))
+        return a, b, a + np.array([0.2, 0.4, 0.6, 0.8]) * (b - a)  # slopes 0.2 .. 0.8
+
+    monkeypatch.setattr(transfer, "transfer_pairs", halfway)
+    monkeypatch.setattr(transfer, "spanning_references", lambda train: [train[0]] * 4)
+    assert transfer.style_transfer(None, normaliser, one_style, 10) == pytest.approx(0.5)
+    assert asked == {"seconds": 10, "by": "latents", "references": 4}
+
+
 def test_transfer_pairs_generate_every_pair_by_each_mechanism(data):
     from gesturelib.evaluation.transfer import transfer_pairs
 

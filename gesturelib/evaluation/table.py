@@ -32,6 +32,7 @@ from gesturelib.evaluation.headline import (
     reference_motions,
 )
 from gesturelib.evaluation.rules import rule_measures
+from gesturelib.evaluation.transfer import style_transfer
 from gesturelib.metrics import (
     JOINT_GROUPS,
     acceleration,
@@ -56,6 +57,8 @@ METRICS: dict[str, str] = {
     "nods": "fraction of the partner's phrase ends answered by a nod when the rule says",
     "nod_precision": "fraction of the nods found that are in a rule's window",
     "beat_align": "Bailando's beat-alignment score against speech onsets (the field's proxy)",
+    "transfer": "slope of the style realised against a reference's, by its latent codes, averaged"
+    " over the style features (1: taken in full; models that replay a reference only)",
 }
 
 #: The references' row names (:func:`reference_draws`).
@@ -102,20 +105,27 @@ def diversity(samples: Sequence[Sequence[np.ndarray]]) -> float:
     return float(np.mean(distances))
 
 
-def score_system(conversations, runs: Draws, features=None, deterministic=False) -> dict:
+def score_system(
+    conversations, runs: Draws, features=None, deterministic=False, transfer=()
+) -> dict:
     """One row of the table: each measure's mean over the draws of every run and its standard
     deviation (``<name>_sd``), and ``seeds``, the number of runs. A measure undefined for any draw
     is NaN (empty in the table), and so is a spread over a single value.
 
     Diversity is a property of a run's samples together: one value per run, its spread over runs.
     ``deterministic``: the system gives one motion per conversation whatever is drawn (a run is
-    one draw), so its diversity is 0.
+    one draw), so its diversity is 0. ``transfer``: each run's
+    :func:`~gesturelib.evaluation.transfer.style_transfer`, for a model that replays a reference
+    (NaN without).
     """
     draws = [score_draw(conversations, sample, features) for run in runs for sample in run]
-    spreads = [0.0 if deterministic else diversity(run) for run in runs]
+    per_run = {
+        "diversity": [0.0 if deterministic else diversity(run) for run in runs],
+        "transfer": list(transfer) or [np.nan],
+    }
     row: dict[str, float] = {"seeds": len(runs)}
     for name in METRICS:
-        values = np.array(spreads if name == "diversity" else [d[name] for d in draws])
+        values = np.array(per_run[name] if name in per_run else [d[name] for d in draws])
         defined = not np.isnan(values).any()
         row[name] = float(values.mean()) if defined else np.nan
         row[f"{name}_sd"] = float(values.std(ddof=1)) if defined and values.size > 1 else np.nan
@@ -193,7 +203,8 @@ def evaluate_models(models: dict, splits, samples: int = 3, features=None) -> tu
             deterministic, or all not). A deterministic model gets a second row,
             ``<name>+smoothed``, of its motion after Kucherenko et al.'s post-processing
             (:func:`positions_of`), and the ground truth too (``ground_truth+smoothed``: what the
-            filters alone do to motion).
+            filters alone do to motion). A model that replays a reference's latent codes
+            (``latents``: MoGlow, Ye et al.'s flow) is also scored on style ``transfer``.
         splits: the dataset's ``{"train", "val", "test"}`` conversations: the training split's
             mean pose, the validation split's motion as mismatched motion.
         samples: draws per conversation of each stochastic system.
@@ -230,7 +241,15 @@ def evaluate_models(models: dict, splits, samples: int = 3, features=None) -> tu
         if runs[0][0].noise_dim == 0:
             fixed |= {name, f"{name}+smoothed"}
             draws[f"{name}+smoothed"] = [positions_of(r, smoothed=True) for r in rotations]
-    rows = {name: score_system(test, runs, features, name in fixed) for name, runs in draws.items()}
+    transfers = {  # a model that replays a reference's latent codes: how far its style follows
+        name: [style_transfer(model, normaliser, splits) for model, normaliser in runs]
+        for name, runs in models.items()
+        if hasattr(runs[0][0], "latents")
+    }
+    rows = {
+        name: score_system(test, runs, features, name in fixed, transfers.get(name, ()))
+        for name, runs in draws.items()
+    }
     return rows, draws
 
 

@@ -129,6 +129,26 @@ def transfer_pairs(
     return tuple(np.array(column) for column in zip(*rows, strict=True))
 
 
+def style_transfer(model, normaliser, splits, seconds: float = 15.0) -> float:
+    """The evaluation table's ``transfer``: **follows** by latent codes, averaged over the style
+    features, for the held-out conversations' speech with every training conversation of
+    :func:`spanning_references`; NaN where the training styles are too few to fit a slope.
+
+    Args:
+        model, normaliser: a model whose stream replays a reference's latent codes (one with
+            ``latents``: MoGlow, Ye et al.'s flow).
+        splits: the dataset's ``{"train", "test", ...}`` conversations.
+        seconds: of each held-out conversation's speech.
+    """
+    references = spanning_references(splits["train"])
+    if len(references) < 2:
+        return float("nan")
+    scores = transfer_scores(
+        *transfer_pairs(model, normaliser, splits["test"], references, seconds, by="latents")
+    )
+    return float(np.mean([score["follows"] for score in scores.values()]))
+
+
 def spanning_references(conversations: Sequence) -> list:
     """The conversations at the two ends of each style feature's range (each once, in the order
     of :data:`~gesturelib.style.STYLE_FEATURES`, lowest first): references whose styles span
