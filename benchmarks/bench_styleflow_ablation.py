@@ -2,13 +2,13 @@
 without its gesture perceptual loss, over seeds.
 
 Trains ``python -m gesturelib train styleflow``'s full-mode recipe from each seed as it is, with
-``global_size=0`` (no global encoder: MoGlow with GRUs and the reconstruction term) and with
+``global_size=0`` (no global encoder: MoGlow with GRUs and both loss terms) and with
 ``perceptual=0`` (no perceptual loss), through the load-or-train cache the chapters share
 (``checkpoints/``: chapter 09's seed 0 is reused), and scores every run on the held-out
 conversations as chapter 07 does (3 samples per conversation, T = 1; FGD with the course's
-feature network). Prints each run's row, then mean ± sd over the seeds of each variant and its
-paired difference from the full model (standard error): Ye et al. report that each part lowers
-the FGD.
+feature network; style transfer by latent codes). Prints each run's row, then mean ± sd over the
+seeds of each variant and its paired difference from the full model (standard error): Ye et al.
+report that each part lowers the FGD and raises the diversity.
 
 Usage::
 
@@ -35,7 +35,7 @@ VARIANTS = {
     "no global encoder": {"global_size": 0},
     "no perceptual loss": {"perceptual": 0.0},
 }
-COLUMNS = ("hellinger", "fgd", "jerk", "ratio", "lead", "nods", "nll", "minutes")
+COLUMNS = ("hellinger", "fgd", "diversity", "jerk", "ratio", "nods", "transfer", "nll", "minutes")
 
 
 def main() -> None:

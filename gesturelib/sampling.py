@@ -333,6 +333,13 @@ def generate(model, normaliser, speech, activity, progress: bool = False, **opti
     return np.concatenate([*parts, stream.finish()], axis=1)
 
 
+def shortest_reference(model) -> int:
+    """Frames of the shortest reference whose base codes ``model`` can read: its control's whole
+    context (past poses or past speech, and the look-ahead) and one frame."""
+    config = model.config
+    return max(config.past_poses, config.speech_past) + config.speech_future + 1
+
+
 def reference_latents(model, normaliser, reference) -> np.ndarray:
     """The base codes of a reference recording's motion, read through the flow with its own
     speech and who is talking (teacher forcing): Ye et al.'s style transfer (their section 4.5).
@@ -361,13 +368,13 @@ def reference_latents(model, normaliser, reference) -> np.ndarray:
     features = ConversationFeatures.from_conversation(reference, len(normaliser.speech_mean))
     config = model.config
     context = {"speech_past": config.speech_past, "speech_future": config.speech_future}
-    frames = len(features.pose) - max(config.past_poses, config.speech_past) - config.speech_future
-    if frames < 1:
-        needed = len(features.pose) - frames + 1
+    needed = shortest_reference(model)
+    if len(features.pose) < needed:
         raise ValueError(
             f"a style reference must be at least {needed} frames ({needed / FPS:.1f} s) long for "
             f"this model, got {len(features.pose)}"
         )
+    frames = len(features.pose) - needed + 1
     windows = WindowConfig(past_poses=config.past_poses, sequence_length=frames, **context)
     batch = WindowDataset([features], windows, normaliser)[0]
     device = device_of(model)

@@ -338,22 +338,35 @@ def test_spanning_references_are_the_ends_of_each_features_range():
 
 
 def test_style_transfer_averages_the_slopes_by_latent_codes(data, monkeypatch):
+    from dataclasses import replace
+
     from gesturelib.evaluation import transfer
+    from gesturelib.sampling import shortest_reference
 
     conversation, normaliser, batch = data
-    one_style = {"train": [conversation], "test": [conversation]}
-    assert np.isnan(transfer.style_transfer(None, normaliser, one_style))  # no slope to fit
+    model = random_model(SMALL, normaliser, batch).float()
+    short = replace(conversation, rotations=conversation.rotations[: shortest_reference(model) - 1])
+    speakers = [object()]  # never read by the stand-in below
+    for train in ([conversation], [conversation, short]):  # the short one cannot be a reference
+        splits = {"train": train, "test": speakers}
+        assert np.isnan(transfer.style_transfer(model, normaliser, splits))  # no slope to fit
     a, b = grid_pairs()
     asked = {}
 
     def halfway(model, normaliser, speakers, references, seconds, by):
-        asked.update(seconds=seconds, by=by, references=len(references))
+        asked.update(speakers=speakers, references=references, seconds=seconds, by=by)
         return a, b, a + np.array([0.2, 0.4, 0.6, 0.8]) * (b - a)  # slopes 0.2 .. 0.8
 
+    def ends(train):
+        asked["candidates"] = train
+        return train * 2
+
     monkeypatch.setattr(transfer, "transfer_pairs", halfway)
-    monkeypatch.setattr(transfer, "spanning_references", lambda train: [train[0]] * 4)
-    assert transfer.style_transfer(None, normaliser, one_style, 10) == pytest.approx(0.5)
-    assert asked == {"seconds": 10, "by": "latents", "references": 4}
+    monkeypatch.setattr(transfer, "spanning_references", ends)
+    splits = {"train": [conversation, short], "test": speakers}
+    assert transfer.style_transfer(model, normaliser, splits, 10) == pytest.approx(0.5)
+    assert asked["candidates"] == [conversation] and asked["references"] == [conversation] * 2
+    assert asked["speakers"] is speakers and (asked["seconds"], asked["by"]) == (10, "latents")
 
 
 def test_transfer_pairs_generate_every_pair_by_each_mechanism(data):

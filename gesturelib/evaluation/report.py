@@ -139,7 +139,7 @@ README_COLUMNS = (
     ("lead error (s) ↓", "lead_error", 3),
     ("nods", "nods", 2),
     ("nod precision", "nod_precision", 2),
-    ("style transfer ↑", "transfer", 2),
+    ("style transfer (1 = full)", "transfer", 2),
 )
 
 

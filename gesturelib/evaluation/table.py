@@ -118,6 +118,7 @@ def score_system(
     :func:`~gesturelib.evaluation.transfer.style_transfer`, for a model that replays a reference
     (NaN without).
     """
+    assert len(transfer) in (0, len(runs)), "one transfer per run, or none"
     draws = [score_draw(conversations, sample, features) for run in runs for sample in run]
     per_run = {
         "diversity": [0.0 if deterministic else diversity(run) for run in runs],
@@ -206,7 +207,8 @@ def evaluate_models(models: dict, splits, samples: int = 3, features=None) -> tu
             filters alone do to motion). A model that replays a reference's latent codes
             (``latents``: MoGlow, Ye et al.'s flow) is also scored on style ``transfer``.
         splits: the dataset's ``{"train", "val", "test"}`` conversations: the training split's
-            mean pose, the validation split's motion as mismatched motion.
+            mean pose and the transfer's references, the validation split's motion as
+            mismatched motion.
         samples: draws per conversation of each stochastic system.
         features: the FGD's feature network (:func:`~gesturelib.evaluation.fgd.feature_network`),
             or None to leave FGD out.

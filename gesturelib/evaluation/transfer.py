@@ -131,8 +131,9 @@ def transfer_pairs(
 
 def style_transfer(model, normaliser, splits, seconds: float = 15.0) -> float:
     """The evaluation table's ``transfer``: **follows** by latent codes, averaged over the style
-    features, for the held-out conversations' speech with every training conversation of
-    :func:`spanning_references`; NaN where the training styles are too few to fit a slope.
+    features, for the held-out conversations' speech with the training conversations of
+    :func:`spanning_references` (among those long enough to read a reference from); NaN where
+    fewer than two remain, as in a dataset of one training recording: no slope can be fitted.
 
     Args:
         model, normaliser: a model whose stream replays a reference's latent codes (one with
@@ -140,7 +141,10 @@ def style_transfer(model, normaliser, splits, seconds: float = 15.0) -> float:
         splits: the dataset's ``{"train", "test", ...}`` conversations.
         seconds: of each held-out conversation's speech.
     """
-    references = spanning_references(splits["train"])
+    from gesturelib.sampling import shortest_reference
+
+    long_enough = [c for c in splits["train"] if len(c.rotations) >= shortest_reference(model)]
+    references = spanning_references(long_enough)
     if len(references) < 2:
         return float("nan")
     scores = transfer_scores(
