@@ -13,6 +13,7 @@ report that each part lowers the FGD and raises the diversity.
 Usage::
 
     .venv/bin/python benchmarks/bench_styleflow_ablation.py [--seeds 0 1 2]
+    .venv/bin/python benchmarks/bench_styleflow_ablation.py --variants "no perceptual loss" &
 """
 
 from __future__ import annotations
@@ -41,6 +42,13 @@ COLUMNS = ("hellinger", "fgd", "diversity", "jerk", "ratio", "nods", "transfer",
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument(
+        "--variants",
+        nargs="+",
+        choices=list(VARIANTS),
+        default=list(VARIANTS),
+        help="train and score only these (to share the work between processes); summary if all",
+    )
     args = parser.parse_args()
     if len(args.seeds) < 2:
         parser.error(f"give at least two --seeds (for a spread), got {args.seeds}")
@@ -53,14 +61,14 @@ def main() -> None:
         progress=False,
     )
     rows = {}
-    for name, changes in VARIANTS.items():
+    for name in args.variants:
         for seed in args.seeds:
             model, history, normaliser = train_model(
                 "styleflow",
                 splits,
                 quick=False,
                 seed=seed,
-                model_changes=changes,
+                model_changes=VARIANTS[name],
                 cache=REPO / "checkpoints",
                 progress=False,
             )
@@ -71,6 +79,8 @@ def main() -> None:
             rows[name, seed] = row
             cells = "  ".join(f"{key} {row[key]:.4g}" for key in COLUMNS)
             print(f"{name:>18} seed {seed}: {cells}", flush=True)
+    if args.variants != list(VARIANTS):
+        return
     print(f"\nmean ± sd over seeds {args.seeds} (held-out, 3 samples per conversation, T = 1)")
     print("| variant | " + " | ".join(COLUMNS) + " |\n|---|" + "---|" * len(COLUMNS))
     for name in VARIANTS:
