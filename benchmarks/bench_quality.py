@@ -6,7 +6,8 @@ changes from each seed through the load-or-train cache (``checkpoints/``: the ch
 ``make results``' runs are reused), draws 3 samples per held-out conversation, and prints per seed
 and as mean ± sd over seeds: the wrist-speed Hellinger distance, wrist jerk, FGD, the
 speaking/listening ratio, the stroke lead, the accents hit, the listener's nods and their
-precision, the 99th percentile of the head's downward pitch speed, the drift
+precision, the 99th percentile of the head's downward pitch speed, the correlation of the two
+wrists' speeds while the agent speaks (:func:`hand_correlation`), the drift
 (:func:`gesturelib.evaluation.headline.drift`: the limb-angle error to the truth in the last
 10 s of the held-out conversations over the first 10 s, averaged over the samples first), the
 parameters and the training minutes.
@@ -31,7 +32,7 @@ import numpy as np
 import torch
 
 from data_synth import course_data, load_dataset
-from gesturelib.conventions import FPS
+from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation.fgd import feature_network
 from gesturelib.evaluation.headline import drift
 from gesturelib.evaluation.rules import head_pitch
@@ -39,7 +40,7 @@ from gesturelib.evaluation.table import score_draw
 from gesturelib.models import Sampling
 from gesturelib.pipeline import speech_to_motion, train_model
 from gesturelib.recipes import RECIPES
-from gesturelib.skeleton import forward_kinematics
+from gesturelib.skeleton import JOINT_INDEX, forward_kinematics
 
 REPO = Path(__file__).resolve().parents[1]
 COLUMNS = (
@@ -52,6 +53,7 @@ COLUMNS = (
     "nods",
     "nod_precision",
     "head_speed",
+    "hand_correlation",
     "drift",
     "minutes",
 )
@@ -76,6 +78,19 @@ def head_speed(motions: list) -> float:
     return float(np.percentile(np.concatenate(speeds), 99))
 
 
+def hand_correlation(motions: list, conversations) -> float:
+    """The correlation of the left and the right wrist's speeds over the frames where the agent
+    speaks: the truth's is about 0.3 (a phrase uses one hand or both, drawn per phrase), near 1
+    when both hands always move together."""
+    wrists = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
+    speeds = [
+        np.linalg.norm(np.diff(m[:, wrists], axis=0), axis=-1)[c.activity[1:] == Activity.A_SPEAKS]
+        for m, c in zip(motions, conversations, strict=True)
+    ]
+    left, right = np.concatenate(speeds).T
+    return float(np.corrcoef(left, right)[0, 1])
+
+
 def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:
     """The measures of one trained model, averaged over ``samples`` draws; ``save``: a file to
     write the draws' keypoints to (``sample<k>_conversation<i>``, ``(T, 9, 3)``)."""
@@ -98,6 +113,7 @@ def score(trained, test, features, samples: int, temperature: float | None, save
         motions = [forward_kinematics(r[k]) for r in per_conversation]
         row = score_draw(test, motions, features)
         row["head_speed"] = head_speed(motions)
+        row["hand_correlation"] = hand_correlation(motions, test)
         draws.append(row)
         saved |= {f"sample{k}_conversation{i}": m for i, m in enumerate(motions)}
     if save is not None:
@@ -141,8 +157,12 @@ def main() -> None:
         quick=args.quick,
         progress=False,
     )
-    truth = head_speed([c.positions for c in test])
-    print(f"ground truth: head_speed {truth:.4g}", flush=True)
+    truth = [c.positions for c in test]
+    print(
+        f"ground truth: head_speed {head_speed(truth):.4g}  "
+        f"hand_correlation {hand_correlation(truth, test):.4g}",
+        flush=True,
+    )
     label = " ".join([args.model, *args.change, *args.train, *args.sampling]) + (
         f" T={args.temperature}" if args.temperature is not None else ""
     )

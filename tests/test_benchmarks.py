@@ -105,11 +105,24 @@ def test_the_quality_benchmark_scores_each_seed_and_their_spread():
     )
     rows = [row for row in output.splitlines() if row.startswith("flowvae residual=True")]
     assert [row.split(" | ")[1] for row in rows] == ["seed 0", "seed 1", "mean ± sd over 2 seeds"]
-    for column in ("hellinger", "jerk", "fgd", "ratio", "nods", "head_speed", "drift", "minutes"):
+    columns = ("hellinger", "jerk", "fgd", "ratio", "nods", "head_speed", "hand_correlation")
+    for column in (*columns, "drift", "minutes"):
         assert all(re.search(rf"\b{column} [-\d.]", row) for row in rows), (column, output)
-    assert re.search(r"ground truth: head_speed \d+", output)
+    assert re.search(r"ground truth: head_speed \d+\S*  hand_correlation 0\.\d+", output)
     refused = launch("bench_quality.py", "flowvae", "--quick", "--change", "lek=0.1")
     assert refused.returncode == 2 and "unexpected keyword argument 'lek'" in refused.stderr
+
+
+def test_the_one_step_benchmark_measures_the_hands_of_truth_one_step_and_free_motion():
+    output = run("bench_one_step.py", "--quick", "--change", "dropout=0.2")
+    for name in ("truth", "one step", "free"):
+        assert re.search(
+            rf"{name}: wrists still 0\.\d\d  one rests, one strokes 0\.\d\d  "
+            rf"speed correlation -?[01]\.\d\d",
+            output,
+        ), (name, output)
+    refused = launch("bench_one_step.py", "--quick", "--change", "dropot=0.2")
+    assert refused.returncode == 2 and "dropot" in refused.stderr
 
 
 def test_the_video_benchmark_times_each_write():
