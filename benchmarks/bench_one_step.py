@@ -21,40 +21,25 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from bench_quality import parse_changes  # this folder is on the path when run as a script
 
 from data_synth import course_data, load_dataset
 from gesturelib.conventions import FPS, Activity
-from gesturelib.data import ConversationFeatures, WindowConfig, WindowDataset
 from gesturelib.pipeline import speech_to_motion, train_model
 from gesturelib.pose_surface import project
 from gesturelib.recipes import RECIPES
-from gesturelib.sampling import shortest_reference
+from gesturelib.sampling import recording_batch
 from gesturelib.skeleton import JOINT_INDEX, forward_kinematics
 
 REPO = Path(__file__).resolve().parents[1]
 WRISTS = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
 
 
-def parse_changes(pairs: list[str]) -> dict:
-    import ast
-
-    return {key: ast.literal_eval(value) for key, _, value in (p.partition("=") for p in pairs)}
-
-
 def one_step(model, normaliser, conversation, generator) -> tuple[np.ndarray, np.ndarray, slice]:
     """Keypoints ``(N, 9, 3)`` of the last true pose and of the one-step draw of every frame
     with a whole control, and the frames of the conversation they stand for."""
-    config = model.config
-    features = ConversationFeatures.from_conversation(conversation, len(normaliser.speech_mean))
-    needed = shortest_reference(model)
-    frames = len(features.pose) - needed + 1
-    windows = WindowConfig(
-        past_poses=config.past_poses,
-        sequence_length=frames,
-        speech_past=config.speech_past,
-        speech_future=config.speech_future,
-    )
-    batch = {k: v[None] for k, v in WindowDataset([features], windows, normaliser)[0].items()}
+    batch = recording_batch(model, normaliser, conversation)
+    frames = batch["pose"].shape[1]
     with torch.no_grad():
         control = model.conditioning(batch)
         last = batch["past_pose"][:, :, -1]
@@ -70,7 +55,7 @@ def one_step(model, normaliser, conversation, generator) -> tuple[np.ndarray, np
         raw = normaliser.denormalise_pose(pose.double().numpy())
         return forward_kinematics(project(torch.as_tensor(raw).reshape(-1, 9, 6)).numpy())
 
-    end = len(conversation.activity) - config.speech_future
+    end = len(conversation.activity) - model.config.speech_future
     return keypoints(last[0]), keypoints(torch.stack(drawn)), slice(end - frames, end)
 
 
@@ -94,7 +79,7 @@ def main() -> None:
     try:
         changes = parse_changes(args.change)
         RECIPES["moglow"].settings(args.quick, changes)
-    except (TypeError, ValueError, SyntaxError) as error:
+    except (TypeError, ValueError) as error:
         parser.error(str(error))
     torch.set_num_threads(1)
     splits = load_dataset(course_data(args.quick))

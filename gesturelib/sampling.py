@@ -358,14 +358,27 @@ def reference_latents(model, normaliser, reference) -> np.ndarray:
         ValueError: a model without base codes, or a reference too short or malformed (from
             :meth:`~gesturelib.data.ConversationFeatures.from_conversation`).
     """
-    from gesturelib.data import ConversationFeatures, WindowConfig, WindowDataset
-
     if not callable(getattr(model, "latents", None)):
         raise ValueError(
             f"a {type(model).__name__} has no base codes to take a reference's style from; "
             "style_from is for MoGlow and Ye et al.'s flow"
         )
-    features = ConversationFeatures.from_conversation(reference, len(normaliser.speech_mean))
+    return model.latents(recording_batch(model, normaliser, reference))[0].cpu().numpy()
+
+
+def recording_batch(model, normaliser, recording) -> dict[str, torch.Tensor]:
+    """A whole recording as one training item of ``model``: the batch ``(1, N, ...)`` of every
+    frame that has its whole control (teacher forcing), on the model's device.
+
+    Args:
+        model, normaliser: a model whose config has ``past_poses`` and the speech context.
+        recording: as :func:`reference_latents`'s ``reference``.
+    Raises:
+        ValueError: a recording shorter than :func:`shortest_reference`, or malformed.
+    """
+    from gesturelib.data import ConversationFeatures, WindowConfig, WindowDataset
+
+    features = ConversationFeatures.from_conversation(recording, len(normaliser.speech_mean))
     config = model.config
     context = {"speech_past": config.speech_past, "speech_future": config.speech_future}
     needed = shortest_reference(model)
@@ -378,8 +391,7 @@ def reference_latents(model, normaliser, reference) -> np.ndarray:
     windows = WindowConfig(past_poses=config.past_poses, sequence_length=frames, **context)
     batch = WindowDataset([features], windows, normaliser)[0]
     device = device_of(model)
-    batch = {name: value[None].to(device) for name, value in batch.items()}
-    return model.latents(batch)[0].cpu().numpy()
+    return {name: value[None].to(device) for name, value in batch.items()}
 
 
 #: Frames pushed at once when generation shows its progress: a minute of speech.
