@@ -75,7 +75,7 @@ def transfer_pairs(
     normaliser,
     speakers: Sequence,
     references: Sequence,
-    seconds: float = 20.0,
+    seconds: float = 15.0,
     seed=0,
     by: str = "latents",
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
