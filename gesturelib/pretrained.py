@@ -23,8 +23,8 @@ from gesturelib.checkpoints import (
 
 #: Where the shipped models live, one run folder each.
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
-#: The shipped models: the two generative models of the course.
-NAMES = ("moglow", "flowvae")
+#: The shipped models: the course's flows and its diffusion model.
+NAMES = ("moglow", "flowvae", "diffusion")
 
 
 def load_run(folder: str | Path, device: str = "cpu"):
