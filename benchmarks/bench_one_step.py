@@ -25,48 +25,23 @@ from bench_quality import parse_changes  # this folder is on the path when run a
 
 from data_synth import course_data, load_dataset
 from gesturelib.conventions import FPS, Activity
+from gesturelib.evaluation import hand_sharing
+from gesturelib.metrics import JOINT_GROUPS
 from gesturelib.pipeline import speech_to_motion, train_model
-from gesturelib.pose_surface import project
 from gesturelib.recipes import RECIPES
-from gesturelib.sampling import recording_batch
-from gesturelib.skeleton import JOINT_INDEX, forward_kinematics
+from gesturelib.sampling import one_step_ahead
+from gesturelib.skeleton import forward_kinematics
 
 REPO = Path(__file__).resolve().parents[1]
-WRISTS = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
-
-
-def one_step(model, normaliser, conversation, generator) -> tuple[np.ndarray, np.ndarray, slice]:
-    """Keypoints ``(N, 9, 3)`` of the last true pose and of the one-step draw of every frame
-    with a whole control, and the frames of the conversation they stand for."""
-    batch = recording_batch(model, normaliser, conversation)
-    frames = batch["pose"].shape[1]
-    with torch.no_grad():
-        control = model.conditioning(batch)
-        last = batch["past_pose"][:, :, -1]
-        change = batch["pose"] - last
-        state, drawn = None, []
-        for t in range(frames):
-            noise = torch.randn(1, 1, change.shape[-1], generator=generator)
-            x, _, _ = model.flow.inverse(noise, control[:, t : t + 1], state)
-            drawn.append(x[0, 0] + last[0, t])
-            _, _, state = model.flow(change[:, t : t + 1], control[:, t : t + 1], state)
-
-    def keypoints(pose):
-        raw = normaliser.denormalise_pose(pose.double().numpy())
-        return forward_kinematics(project(torch.as_tensor(raw).reshape(-1, 9, 6)).numpy())
-
-    end = len(conversation.activity) - model.config.speech_future
-    return keypoints(last[0]), keypoints(torch.stack(drawn)), slice(end - frames, end)
+WRISTS = list(JOINT_GROUPS["wrists"])
 
 
 def hands(label: str, speeds: np.ndarray) -> None:
-    """Print the measures of wrist speeds ``(N, 2)`` cm/s."""
-    still, fast = speeds < 4, speeds > 16
-    parted = (still[:, 0] & fast[:, 1]) | (still[:, 1] & fast[:, 0])
-    correlation = np.corrcoef(speeds[:, 0], speeds[:, 1])[0, 1]
+    """Print :func:`hand_sharing` of wrist speeds ``(N, 2)`` cm/s."""
+    shared = hand_sharing(speeds)
     print(
-        f"{label:>9}: wrists still {still.mean():.2f}  one rests, one strokes {parted.mean():.2f}"
-        f"  speed correlation {correlation:.2f}"
+        f"{label:>9}: wrists still {shared['still']:.2f}  one rests, one strokes "
+        f"{shared['one_hand']:.2f}  speed correlation {shared['correlation']:.2f}"
     )
 
 
@@ -92,10 +67,12 @@ def main() -> None:
         cache=REPO / "checkpoints",
         progress=False,
     )
-    generator = torch.Generator().manual_seed(0)
+    config = trained.model.config
+    first = max(config.past_poses, config.speech_past)
     speeds = {"truth": [], "one step": [], "free": []}
     for conversation in splits["test"]:
-        last, drawn, frames = one_step(trained.model, trained.normaliser, conversation, generator)
+        drawn = forward_kinematics(one_step_ahead(trained.model, trained.normaliser, conversation))
+        frames = slice(first, first + len(drawn))
         free = forward_kinematics(
             speech_to_motion(
                 trained.model,
@@ -107,15 +84,17 @@ def main() -> None:
                 progress=False,
             ).rotations[0]
         )
+        # Speeds into each frame of `frames`: from the recorded pose before it for the truth
+        # and the one-step draws, from the motion's own pose before it for the free run.
+        before = conversation.positions[frames.start - 1 : frames.stop - 1]
         speaking = conversation.activity[frames] == Activity.A_SPEAKS
-        truth = conversation.positions[frames]
-        for name, motion, before in (
-            ("truth", truth, last),
-            ("one step", drawn, last),
+        for name, motion, previous in (
+            ("truth", conversation.positions[frames], before),
+            ("one step", drawn, before),
             ("free", free[frames], free[frames.start - 1 : frames.stop - 1]),
         ):
-            step = np.linalg.norm(motion[:, WRISTS] - before[:, WRISTS], axis=-1) * FPS
-            speeds[name].append(step[speaking])
+            step = motion[:, WRISTS] - previous[:, WRISTS]
+            speeds[name].append(np.linalg.norm(step, axis=-1)[speaking] * FPS)
     print(f"frames where the agent speaks, seed {args.seed} {' '.join(args.change)}")
     for name, parts in speeds.items():
         hands(name, np.concatenate(parts))

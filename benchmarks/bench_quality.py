@@ -34,13 +34,13 @@ import torch
 from data_synth import course_data, load_dataset
 from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation.fgd import feature_network
-from gesturelib.evaluation.headline import drift
+from gesturelib.evaluation.headline import drift, hand_sharing, wrist_speeds
 from gesturelib.evaluation.rules import head_pitch
 from gesturelib.evaluation.table import score_draw
 from gesturelib.models import Sampling
 from gesturelib.pipeline import speech_to_motion, train_model
 from gesturelib.recipes import RECIPES
-from gesturelib.skeleton import JOINT_INDEX, forward_kinematics
+from gesturelib.skeleton import forward_kinematics
 
 REPO = Path(__file__).resolve().parents[1]
 COLUMNS = (
@@ -79,16 +79,13 @@ def head_speed(motions: list) -> float:
 
 
 def hand_correlation(motions: list, conversations) -> float:
-    """The correlation of the left and the right wrist's speeds over the frames where the agent
-    speaks: the truth's is about 0.3 (a phrase uses one hand or both, drawn per phrase), near 1
-    when both hands always move together."""
-    wrists = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
+    """The correlation of the two wrists' speeds over the frames where the agent speaks
+    (:func:`~gesturelib.evaluation.hand_sharing`)."""
     speeds = [
-        np.linalg.norm(np.diff(m[:, wrists], axis=0), axis=-1)[c.activity[1:] == Activity.A_SPEAKS]
+        wrist_speeds(m)[c.activity[1:] == Activity.A_SPEAKS]
         for m, c in zip(motions, conversations, strict=True)
     ]
-    left, right = np.concatenate(speeds).T
-    return float(np.corrcoef(left, right)[0, 1])
+    return hand_sharing(np.concatenate(speeds))["correlation"]
 
 
 def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:

@@ -366,6 +366,50 @@ def reference_latents(model, normaliser, reference) -> np.ndarray:
     return model.latents(recording_batch(model, normaliser, reference))[0].cpu().numpy()
 
 
+def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
+    """Every frame of a recording drawn one step ahead of its *recorded* past: the exposure test.
+
+    The flow's memory and control are those of the recording (teacher forcing, as in training);
+    each frame's pose is drawn from the flow given them (temperature 1), and the memory then moves
+    on with the recorded pose, not the drawn one. Against :func:`generate`, where every frame is fed
+    back, it tells what a model has learned from what it loses to its own output.
+
+    Args:
+        model, normaliser: a recurrent flow over poses (MoGlow, Ye et al.'s flow) and its
+            normaliser.
+        recording: as :func:`reference_latents`'s ``reference``.
+        seed: of the draws.
+    Returns:
+        Limb rotations ``(N, 9, 6)`` on the pose surface, for the recording's frames ``first``
+        to ``first + N - 1``, where ``first = max(past poses, past speech)``: the frames that
+        have their whole control (:func:`recording_batch`).
+    Raises:
+        ValueError: a model that is not a recurrent flow, or a recording too short or malformed.
+    """
+    if not callable(getattr(model, "latents", None)):
+        raise ValueError(
+            f"one_step_ahead draws from a recurrent flow over poses (MoGlow, Ye et al.'s flow), "
+            f"not a {type(model).__name__}"
+        )
+    batch = recording_batch(model, normaliser, recording)
+    # The residual flow models the change from the last pose, the recorded one here.
+    origin = (
+        batch["past_pose"][:, :, -1] if model.config.residual else torch.zeros_like(batch["pose"])
+    )
+    generator = torch.Generator().manual_seed(seed)
+    drawn, state = [], None
+    with torch.no_grad(), model.generating():
+        control = model.conditioning(batch)
+        recorded = batch["pose"] - origin
+        for t in range(recorded.shape[1]):
+            noise = standard_normal((1, 1, POSE_DIM), generator, device_of(model))
+            pose, _, _ = model.flow.inverse(noise, control[:, t : t + 1], state)
+            drawn.append(pose[0, 0] + origin[0, t])
+            _, _, state = model.flow(recorded[:, t : t + 1], control[:, t : t + 1], state)
+    raw = normaliser.denormalise_pose(torch.stack(drawn).double().cpu().numpy())
+    return project(torch.as_tensor(raw).reshape(-1, NUM_JOINTS, 6)).numpy()
+
+
 def recording_batch(model, normaliser, recording) -> dict[str, torch.Tensor]:
     """A whole recording as one training item of ``model``: the batch ``(1, N, ...)`` of every
     frame that has its whole control (teacher forcing), on the model's device.

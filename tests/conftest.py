@@ -55,19 +55,19 @@ def moglow_run(tmp_path_factory, tiny_data):
 
 @pytest.fixture(scope="session")
 def trained_looking():
-    """A function ``(config, normaliser, batch, seed=0) -> MoGlow`` giving a model whose every
-    weight is random (so no layer is an identity and every input reaches the output) and whose
-    ActNorm layers have seen ``batch``."""
+    """A function ``(config, normaliser, batch, seed=0, spread=0.2) -> MoGlow`` giving a model
+    whose every weight is random (so no layer is an identity and every input reaches the output:
+    noise of ``spread`` added to each) and whose ActNorm layers have seen ``batch``."""
     from gesturelib.models import MoGlow
 
-    def make(config, normaliser, batch, seed=0):
+    def make(config, normaliser, batch, seed=0, spread=0.2):
         torch.manual_seed(seed)
         model = MoGlow(config, normaliser)
         model.loss(batch)  # initialises ActNorm and the conditioners
         generator = torch.Generator().manual_seed(seed)
         with torch.no_grad():
             for parameter in model.parameters():
-                parameter.add_(0.2 * torch.randn(parameter.shape, generator=generator))
+                parameter.add_(spread * torch.randn(parameter.shape, generator=generator))
         return model.eval()
 
     return make

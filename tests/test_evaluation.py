@@ -6,6 +6,7 @@ import pytest
 from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation import (
     WRIST_SPEED_BINS,
+    hand_sharing,
     speaking_listening_ratio,
     stroke_lead,
     wrist_speed_hellinger,
@@ -45,6 +46,20 @@ def test_the_speaking_listening_ratio_compares_mean_wrist_speeds():
     assert speaking_listening_ratio(motion, activity) == pytest.approx(3.0)
     with pytest.raises(ValueError, match="both speak and listen"):
         speaking_listening_ratio(motion, np.full(101, Activity.A_SPEAKS))
+
+
+def test_hand_sharing_tells_hands_that_take_turns_from_hands_that_move_together():
+    turns = np.array([[30.0, 1.0], [2.0, 20.0]] * 50)  # one hand strokes while the other rests
+    assert hand_sharing(turns) == pytest.approx(
+        {"still": 0.5, "one_hand": 1.0, "correlation": -1.0}
+    )
+    together = np.array([[30.0, 25.0], [2.0, 3.0], [10.0, 12.0]] * 20)
+    shared = hand_sharing(together)
+    assert shared["one_hand"] == 0.0 and shared["still"] == pytest.approx(1 / 3)
+    assert shared["correlation"] > 0.99
+    assert np.isnan(hand_sharing(np.ones((10, 2)))["correlation"])  # no variation: undefined
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        hand_sharing(np.ones((10, 9)))
 
 
 def test_the_stroke_lead_of_the_generators_motion_is_its_rule():

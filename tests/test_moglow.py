@@ -236,3 +236,34 @@ def test_generation_with_a_progress_bar_draws_the_same_motion(
         model, normaliser, speech, conversation.activity, samples=2, seed=4, progress=True
     )
     np.testing.assert_array_equal(whole, pushed)
+
+
+def test_one_step_ahead_is_teacher_forced_draw_by_draw(data, trained_looking, monkeypatch):
+    """Given the recording's own base codes for noise, every one-step draw is the recorded pose:
+    the memory moves on with the recording, not with the draws; with random noise, the draws are
+    seeded poses on the surface."""
+    import gesturelib.sampling as sampling
+    from gesturelib.models import Aud2Pose, Aud2PoseConfig
+
+    conversation, normaliser, batch = data
+    # Weights less random than elsewhere: float32 inverts the flow to within 1e-6.
+    model = trained_looking(SMALL, normaliser, batch, spread=0.05)
+    drawn = sampling.one_step_ahead(model, normaliser, conversation, seed=3)
+    first = max(SMALL.past_poses, SMALL.speech_past)
+    frames = len(conversation.rotations) - first - SMALL.speech_future
+    assert drawn.shape == (frames, 9, 6)
+    np.testing.assert_allclose(project(torch.as_tensor(drawn)).numpy(), drawn, atol=1e-6)
+    np.testing.assert_array_equal(
+        drawn, sampling.one_step_ahead(model, normaliser, conversation, 3)
+    )
+    assert not np.allclose(drawn, sampling.one_step_ahead(model, normaliser, conversation, 4))
+
+    codes = iter(sampling.reference_latents(model, normaliser, conversation))
+    monkeypatch.setattr(
+        sampling, "standard_normal", lambda shape, *_: torch.as_tensor(next(codes)).reshape(shape)
+    )
+    recorded = conversation.rotations[first : first + frames]
+    replayed = sampling.one_step_ahead(model, normaliser, conversation)
+    np.testing.assert_allclose(replayed, recorded, atol=1e-5)
+    with pytest.raises(ValueError, match="recurrent flow"):
+        sampling.one_step_ahead(Aud2Pose(Aud2PoseConfig.quick()), normaliser, conversation)

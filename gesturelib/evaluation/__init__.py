@@ -1,8 +1,9 @@
 """How generated motion is measured, against the ground truth, references and the generator's rules.
 
 * :mod:`~gesturelib.evaluation.headline`: the course's headline measures (wrist-speed
-  Hellinger distance, speaking/listening ratio, stroke lead), the references every model is
-  compared with, and generation for held-out conversations (exported here);
+  Hellinger distance, speaking/listening ratio, stroke lead, how the hands share the
+  gesturing), the references every model is compared with, and generation for held-out
+  conversations (exported here);
 * :mod:`~gesturelib.evaluation.rules`: appropriateness against the generator's event log, and
   Bailando's beat alignment;
 * :mod:`~gesturelib.evaluation.fgd`: the Fréchet gesture distance and its feature network;
@@ -15,6 +16,7 @@
 from gesturelib.evaluation.headline import (
     WRIST_SPEED_BINS,
     generate_for,
+    hand_sharing,
     headline_measures,
     reference_motions,
     speaking_listening_ratio,
@@ -27,6 +29,7 @@ from gesturelib.evaluation.headline import (
 __all__ = [
     "WRIST_SPEED_BINS",
     "generate_for",
+    "hand_sharing",
     "headline_measures",
     "reference_motions",
     "speaking_listening_ratio",

@@ -7,6 +7,7 @@ name to its keypoints ``(T, 9, 3)``, one per held-out conversation (one draw of 
   joint (Taylor et al. 2021, Figure 6);
 * :func:`plot_speaking_listening`: the rate of change of that distance while the agent speaks
   and while it listens (their Figure 8);
+* :func:`plot_hands`: each wrist's speed over time, per system: whether the hands take turns;
 * :func:`plot_overlays`: each system's skeleton drawn once a second, overlaid.
 """
 
@@ -16,9 +17,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from gesturelib.conventions import FPS
-from gesturelib.evaluation.headline import WRIST_SPEED_BINS, wrist_speed_histogram
+from gesturelib.evaluation.headline import WRIST_SPEED_BINS, wrist_speed_histogram, wrist_speeds
 from gesturelib.metrics import distance_from_mean_pose, speaking_listening_statistics
-from gesturelib.skeleton import KEYPOINTS
+from gesturelib.skeleton import JOINT_INDEX, KEYPOINTS
 
 
 def plot_speed_histograms(motions: dict, truth) -> plt.Figure:
@@ -97,6 +98,31 @@ def plot_mean_pose_distance_series(
     fig.legend(handles=shading, fontsize=7, loc="upper right", title="who is talking")
     axes[-1].set_xlabel("time (s)")
     fig.supylabel("distance from the mean pose (cm)", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
+    return fig
+
+
+def plot_hands(motions: dict, activity: np.ndarray, seconds: float = 12.0) -> plt.Figure:
+    """Each wrist's speed over the first ``seconds`` of one conversation, one panel per system
+    (``motions``: a system's name to its keypoints ``(T, 9, 3)`` of that conversation), the
+    agent's speech shaded (``activity`` ``(T,)``): whether the hands take turns."""
+    from gesturelib import viz
+
+    frames = int(seconds * FPS)
+    times = np.arange(1, frames) / FPS
+    fig, axes = plt.subplots(
+        len(motions), 1, figsize=(9, 1.4 * len(motions) + 0.6), sharex=True, sharey=True
+    )
+    axes = np.atleast_1d(axes)
+    for ax, (name, motion) in zip(axes, motions.items(), strict=True):
+        speeds = wrist_speeds(motion[:frames])
+        ax.plot(times, speeds[:, 0], lw=1.0, color=viz.bone_colour(JOINT_INDEX["left_wrist"]))
+        ax.plot(times, speeds[:, 1], lw=1.0, color=viz.bone_colour(JOINT_INDEX["right_wrist"]))
+        shading = viz.shade_activity(ax, activity[:frames])
+        ax.set_ylabel(name, fontsize=8, rotation=0, ha="right", va="center")
+    viz.side_legend(fig, shading, fontsize=7, loc="upper left", ncol=2 + len(shading))
+    axes[-1].set_xlabel("time (s)")
+    fig.supylabel("wrist speed (cm/s)", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.9))
     return fig
 

@@ -11,6 +11,8 @@ them (``docs/architecture.md`` states the contract):
 * :func:`stroke_lead`: by how much the wrists' speed leads the emphasis of the agent's speech,
   measured from the audio (``data_synth.measure_stroke_lead``); the generator's strokes lead
   their accents by ``stroke_lead_s`` = 0.2 s.
+* :func:`hand_sharing`: whether the two hands take turns, as a speaker who gestures with one
+  hand at a time does, or always move together.
 * :func:`error_over_time` and :func:`drift`: whether generated motion wanders off as a
   conversation goes on: its limb-angle error to the recorded motion per 10 s, and how much larger
   it is at the end than at the start. One sample's drift varies much from draw to draw: average
@@ -83,6 +85,38 @@ def speaking_listening_ratio(positions, activity, fps: int = FPS) -> float:
         raise ValueError("the agent must both speak and listen for a speaking/listening ratio")
     listening = speeds[~speaking].mean()
     return float(speeds[speaking].mean() / listening) if listening > 0 else float("nan")
+
+
+#: A wrist slower than this rests (cm/s: the first bin of :data:`WRIST_SPEED_BINS`).
+RESTING_SPEED = 4.0
+#: A wrist faster than this strokes (cm/s).
+STROKING_SPEED = 16.0
+
+
+def hand_sharing(speeds: np.ndarray) -> dict[str, float]:
+    """How the two hands share the gesturing, from wrist speeds ``(N, 2)`` cm/s (left, right;
+    e.g. :func:`wrist_speeds` over the frames where the agent speaks).
+
+    Returns:
+        ``still``: the share of wrist-frames at rest (under :data:`RESTING_SPEED`);
+        ``one_hand``: the share of frames where one wrist rests while the other strokes (over
+        :data:`STROKING_SPEED`); ``correlation``: the correlation of the two wrists' speeds
+        (near 1 when both hands always move together; NaN where a wrist's speed never changes).
+    Raises:
+        ValueError: ``speeds`` not of shape ``(N, 2)`` with ``N >= 1``.
+    """
+    speeds = np.asarray(speeds, dtype=float)
+    if speeds.ndim != 2 or speeds.shape[1] != 2 or len(speeds) == 0:
+        raise ValueError(f"speeds must be (N, 2): the left and right wrist, got {speeds.shape}")
+    still, stroking = speeds < RESTING_SPEED, speeds > STROKING_SPEED
+    one_hand = (still[:, 0] & stroking[:, 1]) | (still[:, 1] & stroking[:, 0])
+    left, right = speeds.T
+    varies = left.std() > 0 and right.std() > 0
+    return {
+        "still": float(still.mean()),
+        "one_hand": float(one_hand.mean()),
+        "correlation": float(np.corrcoef(left, right)[0, 1]) if varies else float("nan"),
+    }
 
 
 def stroke_lead(
