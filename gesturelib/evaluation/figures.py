@@ -114,13 +114,16 @@ def plot_hands(motions: dict, activity: np.ndarray, seconds: float = 12.0) -> pl
         len(motions), 1, figsize=(9, 1.4 * len(motions) + 0.6), sharex=True, sharey=True
     )
     axes = np.atleast_1d(axes)
+    wrists = ("left_wrist", "right_wrist")  # the columns of wrist_speeds
     for ax, (name, motion) in zip(axes, motions.items(), strict=True):
         speeds = wrist_speeds(motion[:frames])
-        ax.plot(times, speeds[:, 0], lw=1.0, color=viz.bone_colour(JOINT_INDEX["left_wrist"]))
-        ax.plot(times, speeds[:, 1], lw=1.0, color=viz.bone_colour(JOINT_INDEX["right_wrist"]))
+        for column, wrist in enumerate(wrists):
+            colour = viz.bone_colour(JOINT_INDEX[wrist])
+            ax.plot(times, speeds[:, column], lw=1.0, color=colour, label=wrist.replace("_", " "))
         shading = viz.shade_activity(ax, activity[:frames])
         ax.set_ylabel(name, fontsize=8, rotation=0, ha="right", va="center")
-    viz.side_legend(fig, shading, fontsize=7, loc="upper left", ncol=2 + len(shading))
+    lines, _ = axes[0].get_legend_handles_labels()
+    fig.legend(handles=[*lines, *shading], fontsize=7, loc="upper left", ncol=len(lines) + 3)
     axes[-1].set_xlabel("time (s)")
     fig.supylabel("wrist speed (cm/s)", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.9))
