@@ -772,7 +772,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from gesturelib.distributed import start_from_environment, world
+from gesturelib.distributed import finish, start_from_environment, world
 from gesturelib.flows import ActNorm
 from gesturelib.train import TrainConfig, train
 
@@ -809,7 +809,11 @@ torch.manual_seed(0)
 model = Regressor(Config())
 config = TrainConfig(epochs=epochs, batch_size=16, warmup_steps=8, lr_max=0.05, lr_min=0.005)
 history = train(model, data(64, 1), data(32, 2), config, folder, progress=False)
-torch.save({"weights": model.state_dict(), "train": history.train}, f"{folder}/result{world()[0]}.pt")
+rank = world()[0]
+torch.save({"weights": model.state_dict(), "train": history.train}, f"{folder}/result{rank}.pt")
+# Leave the process group before exiting, as the command line does: a process that exits with
+# gloo's threads still running can abort ("terminate called without an active exception").
+finish()
 """
 
 
