@@ -32,9 +32,9 @@ import numpy as np
 import torch
 
 from data_synth import course_data, load_dataset
-from gesturelib.conventions import FPS, Activity
+from gesturelib.conventions import FPS
 from gesturelib.evaluation.fgd import feature_network
-from gesturelib.evaluation.headline import drift, hand_sharing, wrist_speeds
+from gesturelib.evaluation.headline import drift, hand_sharing, speaking_wrist_speeds
 from gesturelib.evaluation.rules import head_pitch
 from gesturelib.evaluation.table import score_draw
 from gesturelib.models import Sampling
@@ -81,11 +81,7 @@ def head_speed(motions: list) -> float:
 def hand_correlation(motions: list, conversations) -> float:
     """The correlation of the two wrists' speeds over the frames where the agent speaks
     (:func:`~gesturelib.evaluation.hand_sharing`)."""
-    speeds = [
-        wrist_speeds(m)[c.activity[1:] == Activity.A_SPEAKS]
-        for m, c in zip(motions, conversations, strict=True)
-    ]
-    return hand_sharing(np.concatenate(speeds))["correlation"]
+    return hand_sharing(speaking_wrist_speeds(motions, conversations))["correlation"]
 
 
 def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:

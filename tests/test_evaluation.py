@@ -8,6 +8,7 @@ from gesturelib.evaluation import (
     WRIST_SPEED_BINS,
     hand_sharing,
     speaking_listening_ratio,
+    speaking_wrist_speeds,
     stroke_lead,
     wrist_speed_hellinger,
     wrist_speed_histogram,
@@ -60,6 +61,17 @@ def test_hand_sharing_tells_hands_that_take_turns_from_hands_that_move_together(
     assert np.isnan(hand_sharing(np.ones((10, 2)))["correlation"])  # no variation: undefined
     with pytest.raises(ValueError, match=r"\(N, 2\)"):
         hand_sharing(np.ones((10, 9)))
+
+
+def test_speaking_wrist_speeds_keep_the_frames_where_the_agent_speaks():
+    from types import SimpleNamespace
+
+    motion = np.repeat(t_pose()[None], 101, axis=0)
+    motion[:, WRISTS[0], 0] += 0.4 * np.arange(101)  # the left wrist at 10 cm/s, the right still
+    activity = np.where(np.arange(101) < 41, Activity.A_SPEAKS, Activity.B_SPEAKS)
+    speeds = speaking_wrist_speeds([motion], [SimpleNamespace(activity=activity)])
+    assert speeds.shape == (40, 2)  # the speeds into frames 1-40
+    np.testing.assert_allclose(speeds, [[10.0, 0.0]] * 40, atol=1e-9)
 
 
 def test_the_stroke_lead_of_the_generators_motion_is_its_rule():

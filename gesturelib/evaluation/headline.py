@@ -11,8 +11,8 @@ them (``docs/architecture.md`` states the contract):
 * :func:`stroke_lead`: by how much the wrists' speed leads the emphasis of the agent's speech,
   measured from the audio (``data_synth.measure_stroke_lead``); the generator's strokes lead
   their accents by ``stroke_lead_s`` = 0.2 s.
-* :func:`hand_sharing`: whether the two hands take turns, as a speaker who gestures with one
-  hand at a time does, or always move together.
+* :func:`hand_sharing` (of :func:`speaking_wrist_speeds`): whether one hand rests while the
+  other gestures, as the agent's often does, or both always move together.
 * :func:`error_over_time` and :func:`drift`: whether generated motion wanders off as a
   conversation goes on: its limb-angle error to the recorded motion per 10 s, and how much larger
   it is at the end than at the start. One sample's drift varies much from draw to draw: average
@@ -85,6 +85,20 @@ def speaking_listening_ratio(positions, activity, fps: int = FPS) -> float:
         raise ValueError("the agent must both speak and listen for a speaking/listening ratio")
     listening = speeds[~speaking].mean()
     return float(speeds[speaking].mean() / listening) if listening > 0 else float("nan")
+
+
+def speaking_wrist_speeds(
+    motions: Sequence[np.ndarray], conversations, fps: int = FPS
+) -> np.ndarray:
+    """Both wrists' speeds ``(N, 2)`` cm/s over the frames where the agent speaks (``A_SPEAKS``),
+    pooled over ``motions`` (keypoints ``(T, 9, 3)``, one per conversation of ``conversations``,
+    whose ``activity`` says who talks): what :func:`hand_sharing` reads."""
+    return np.concatenate(
+        [
+            wrist_speeds(motion, fps)[np.asarray(c.activity)[1:] == Activity.A_SPEAKS]
+            for motion, c in zip(motions, conversations, strict=True)
+        ]
+    )
 
 
 #: A wrist slower than this rests (cm/s: the first bin of :data:`WRIST_SPEED_BINS`).
