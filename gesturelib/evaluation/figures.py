@@ -7,7 +7,8 @@ name to its keypoints ``(T, 9, 3)``, one per held-out conversation (one draw of 
   joint (Taylor et al. 2021, Figure 6);
 * :func:`plot_speaking_listening`: the rate of change of that distance while the agent speaks
   and while it listens (their Figure 8);
-* :func:`plot_hands`: each wrist's speed over time, per system: whether the hands take turns;
+* :func:`plot_hands`: each wrist's speed over time, per system: whether one hand rests while
+  the other gestures;
 * :func:`plot_overlays`: each system's skeleton drawn once a second, overlaid.
 """
 
@@ -105,7 +106,8 @@ def plot_mean_pose_distance_series(
 def plot_hands(motions: dict, activity: np.ndarray, seconds: float = 12.0) -> plt.Figure:
     """Each wrist's speed over the first ``seconds`` of one conversation, one panel per system
     (``motions``: a system's name to its keypoints ``(T, 9, 3)`` of that conversation), the
-    agent's speech shaded (``activity`` ``(T,)``): whether the hands take turns."""
+    agent's speech shaded (``activity`` ``(T,)``): whether one hand rests while the other
+    gestures."""
     from gesturelib import viz
 
     frames = int(seconds * FPS)

@@ -109,7 +109,7 @@ STROKING_SPEED = 16.0
 
 def hand_sharing(speeds: np.ndarray) -> dict[str, float]:
     """How the two hands share the gesturing, from wrist speeds ``(N, 2)`` cm/s (left, right;
-    e.g. :func:`wrist_speeds` over the frames where the agent speaks).
+    e.g. :func:`speaking_wrist_speeds`).
 
     Returns:
         ``still``: the share of wrist-frames at rest (under :data:`RESTING_SPEED`);
