@@ -61,6 +61,16 @@ def build(config, normaliser, batch, seed=0, perturb=True):
     return model.eval()
 
 
+def rest_pose(model):
+    """The pose ``(54,)`` a model's pull aims at: the tracked rest pose, or the mean pose (zero)
+    for a model pulled towards the mean (or not pulled: then it does not matter)."""
+    if model.config.leak and model.config.pull_to_rest:
+        assert model.rest_seen  # set by the training batch `build` showed it
+        return model.rest_pose
+    assert not hasattr(model, "rest_pose")
+    return torch.zeros(54, dtype=torch.float64)
+
+
 def identity_flow(model):
     """Make the flow a rotation: ActNorm at the identity, couplings at their zero start."""
     with torch.no_grad():
@@ -81,10 +91,11 @@ def identity_flow(model):
         ELBO,
         dataclasses.replace(PAPER, residual=True),
         dataclasses.replace(PAPER, residual=True, leak=0.2),
+        dataclasses.replace(PAPER, residual=True, leak=0.2, pull_to_rest=False),
         dataclasses.replace(ELBO, residual=True, leak=0.2),
         FlowVAEConfig(**SIZES),
     ],
-    ids=["paper", "elbo", "residual", "leak", "elbo-leak", "recipe"],
+    ids=["paper", "elbo", "residual", "leak", "leak-to-mean", "elbo-leak", "recipe"],
 )
 def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config, step_through):
     _, normaliser, batch, _ = data
@@ -102,11 +113,11 @@ def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config, 
     drawn, _, _ = model.flow.inverse(z, cond)
     stepped = step_through(model, batch, z)
     # A residual model adds each change to the last generated latent moved `leak` of the way
-    # to the mean pose's, starting from the encoding of the past pose before the first frame.
+    # to the rest pose's, starting from the encoding of the past pose before the first frame.
     latents = drawn
     if config.residual:
         last = model.encode(batch["past_pose"][:, :1, -1])
-        rest = model.encode(torch.zeros(54, dtype=torch.float64))
+        rest = model.encode(rest_pose(model))
         steps = []
         for t in range(drawn.shape[1]):
             last = drawn[:, t : t + 1] + last - config.leak * (last - rest)
@@ -125,9 +136,9 @@ def test_each_term_of_the_papers_loss_on_a_known_answer(data, residual, leak):
     terms = model.loss(batch)
     latent = model.encode(pose)
     origin = 0.0
-    if residual:  # e(x_{t-1}), moved `leak` of the way to the mean pose's latent e(0)
+    if residual:  # e(x_{t-1}), moved `leak` of the way to the rest pose's latent e(r)
         last = model.encode(batch["past_pose"][:, :, -1])
-        origin = last - leak * (last - model.encode(torch.zeros(54, dtype=torch.float64)))
+        origin = last - leak * (last - model.encode(rest_pose(model)))
     # A rotation keeps lengths and has log-determinant 0: NLL is the standard normal's.
     change = latent - origin
     nll = (0.5 * change.square().sum(-1) + 0.5 * 4 * math.log(2 * math.pi)).sum(1).mean() / length
@@ -285,11 +296,51 @@ def test_runs_saved_before_the_pull_and_the_detached_prior_load_as_they_were_tra
     existed: it was trained without them, whatever the defaults are now."""
     stored = config_to_dict(config_class(**SIZES, residual=residual, leak=0.0))
     stored.pop("leak")
+    stored.pop("pull_to_rest")
     stored.pop("detach_prior", None)
     config = config_from_dict(config_class, stored)
     assert config.residual == residual and config.leak == 0.0
     assert getattr(config, "detach_prior", False) is False
     assert config_from_dict(config_class, config_to_dict(config_class())) == config_class()
+
+
+@pytest.mark.parametrize("config_class", [FlowVAEConfig, VariationalFlowVAEConfig])
+def test_runs_pulled_towards_the_mean_pose_load_as_they_were_trained(config_class):
+    """Runs saved before the rest pose existed were pulled towards the mean pose: without
+    ``pull_to_rest`` in their config they load so, and their weights (no rest pose) fit."""
+    stored = config_to_dict(config_class(**SIZES, leak=0.2))
+    stored.pop("pull_to_rest")
+    config = config_from_dict(config_class, stored)
+    assert config.leak == 0.2 and not config.pull_to_rest
+    model = FlowVAE(config) if config_class is FlowVAEConfig else VariationalFlowVAE(config)
+    assert "rest_pose" not in model.state_dict()
+
+
+def test_the_rest_pose_is_the_running_mean_of_the_stillest_quarter_of_the_frames(data):
+    """The first training batch sets the rest pose to the mean of the quarter of its frames that
+    changed least from their last poses; each later batch moves it 5 % of the way to its own."""
+    _, _, batch, _ = data
+    torch.manual_seed(0)
+    model = FlowVAE(FlowVAEConfig(**SIZES)).double()
+    batch = {name: part.double() for name, part in batch.items()}
+    pose, last = batch["pose"], batch["past_pose"][:, :, -1]
+
+    def stillest_mean(pose, last):
+        frames, changes = pose.flatten(0, 1), (pose - last).norm(dim=-1).flatten()
+        order = changes.argsort()
+        count = int(np.floor(0.25 * (len(order) - 1))) + 1  # the frames at or below the quantile
+        return frames[order[:count]].mean(0)
+
+    assert not model.rest_seen and not model.rest_pose.any()
+    model.loss(batch)
+    first = stillest_mean(pose, last)
+    torch.testing.assert_close(model.rest_pose, first)
+    moved = pose.flip(-1)  # another batch, whose still frames lie elsewhere
+    model.loss({**batch, "pose": moved})
+    torch.testing.assert_close(model.rest_pose, first + 0.05 * (stillest_mean(moved, last) - first))
+    model.eval()
+    model.loss(batch)  # evaluation leaves it
+    torch.testing.assert_close(model.rest_pose, first + 0.05 * (stillest_mean(moved, last) - first))
 
 
 @pytest.mark.parametrize(

@@ -49,11 +49,16 @@ generated change to the last generated latent. Its motion is smooth, but over lo
 drifts away from any plausible pose: the small errors of each change add up, and nothing pulls
 the latent back (notebook 06 measures it; with ``latent_noise`` the noise itself adds up, a
 random walk). ``leak`` is the pull: the change is measured from the last latent moved a fraction
-``leak`` of the way towards the mean pose's latent ``e(0)``, ``h_t - (e(x_{t-1}) - leak *
-(e(x_{t-1}) - e(0)))``, still a known shift. The flow can learn to undo the pull where the data
+``leak`` of the way towards the rest pose's latent ``e(r)``, ``h_t - (e(x_{t-1}) - leak *
+(e(x_{t-1}) - e(r)))``, still a known shift. The flow can learn to undo the pull where the data
 moves away from rest (its control shows the last poses), while the errors it cannot fit now
-decay instead of adding up. (Re-encoding each decoded pose as the origin, ``e(d(h'_{t-1}))``, is no
-remedy: encoder and decoder do not quite undo each other, and the errors grow.)
+decay instead of adding up. The rest pose ``r`` (``rest_pose``) is where the agent spends its
+still moments: the running mean, over the training batches, of the quarter of their frames that
+moved least since the last frame. A pull towards the mean pose instead (``pull_to_rest=False``,
+runs saved before the rest pose existed) aims halfway between rest and gesture, so the flow must
+push against it even where the agent rests, and runs drifted more. (Re-encoding each decoded
+pose as the origin, ``e(d(h'_{t-1}))``, is no remedy: encoder and decoder do not quite undo each
+other, and the errors grow.)
 
 Logged scalars (``loss(batch)``), all per frame: :class:`FlowVAE`: ``loss``, ``nll`` (of the
 latent, nats), ``mse`` (of ``d(h)``, per number), ``sample_mse`` (of ``d(h')``; always on the
@@ -110,13 +115,15 @@ class LatentFlowConfig(ControlConfig):
         hidden: units of each coupling's LSTM and of the control encoder (the paper: 400).
         residual: the flow models ``h_t - e(x_{t-1})`` (needs ``past_poses >= 1``), not ``h_t``
             as the paper does; see the module docstring.
-        leak: with ``residual``, the fraction of the way from the last latent to the mean pose's
+        leak: with ``residual``, the fraction of the way from the last latent to the rest pose's
             that the change is measured from (0: none; see the module docstring).
+        pull_to_rest: ``leak`` pulls towards the rest pose's latent (the model tracks the rest
+            pose while training), not the mean pose's.
     """
 
     #: Fields added after runs were saved, with the value those runs were trained with, so that
     #: their checkpoints load as they were trained (:func:`gesturelib.configs.config_from_dict`).
-    FIELDS_ADDED: ClassVar[dict] = {"leak": 0.0}
+    FIELDS_ADDED: ClassVar[dict] = {"leak": 0.0, "pull_to_rest": False}
 
     latent_dim: int = 16
     autoencoder_hidden: int = 105
@@ -124,6 +131,7 @@ class LatentFlowConfig(ControlConfig):
     hidden: int = 64
     residual: bool = True
     leak: float = 0.02
+    pull_to_rest: bool = True
 
     def __post_init__(self):
         super().__post_init__()
@@ -131,7 +139,7 @@ class LatentFlowConfig(ControlConfig):
             self,
             positive=("latent_dim", "autoencoder_hidden", "steps", "hidden"),
             fractions=("leak",),
-            flags=("residual",),
+            flags=("residual", "pull_to_rest"),
         )
         if not 2 <= self.latent_dim < POSE_DIM:
             raise ValueError(
@@ -167,7 +175,7 @@ class FlowVAEConfig(LatentFlowConfig):
             (the paper's does).
     """
 
-    FIELDS_ADDED: ClassVar[dict] = {"leak": 0.0, "detach_prior": False}
+    FIELDS_ADDED: ClassVar[dict] = {**LatentFlowConfig.FIELDS_ADDED, "detach_prior": False}
 
     alpha: float = 5e-4
     sample_weight: float = 1.0
@@ -209,6 +217,10 @@ class _LatentFlowModel(nn.Module):
 
     #: The temperature generation uses unless told otherwise.
     default_temperature = 1.0
+    #: The share of a training batch's frames, those that moved least, whose mean pose is taken
+    #: as the rest pose, and how far each batch moves the tracked rest pose towards it.
+    still_share = 0.25
+    rest_momentum = 0.05
 
     def __init__(self, config: LatentFlowConfig):
         super().__init__()
@@ -224,6 +236,11 @@ class _LatentFlowModel(nn.Module):
             seed=int(torch.randint(2**31, ())),  # from the global generator, like every weight
         )
         self.decoder = mlp([config.latent_dim, config.autoencoder_hidden, POSE_DIM])
+        if config.leak and config.pull_to_rest:
+            # The pose the pull aims at, normalised (the mean pose, zero, until training sees
+            # data), and whether a batch has set it yet.
+            self.register_buffer("rest_pose", torch.zeros(POSE_DIM))
+            self.register_buffer("rest_seen", torch.tensor(False))
 
     def encode(self, pose: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
@@ -264,11 +281,23 @@ class _LatentFlowModel(nn.Module):
 
     def _toward_rest(self, last: torch.Tensor) -> torch.Tensor:
         """A residual model's origin: the last latent ``(..., latent_dim)``, moved ``leak`` of
-        the way towards the mean pose's latent."""
+        the way towards the rest pose's latent (the mean pose's without ``pull_to_rest``)."""
         if not self.config.leak:
             return last
-        rest = self.encode(last.new_zeros(POSE_DIM))  # the mean pose is zero, normalised
-        return last - self.config.leak * (last - rest)
+        rest = self.rest_pose if hasattr(self, "rest_pose") else last.new_zeros(POSE_DIM)
+        return last - self.config.leak * (last - self.encode(rest.to(last)))
+
+    @torch.no_grad()
+    def _track_rest(self, pose: torch.Tensor, last: torch.Tensor) -> None:
+        """Move ``rest_pose`` towards the mean of the poses ``(B, L, 54)`` that moved least from
+        their last poses ``(B, L, 54)`` (the first batch sets it)."""
+        change = (pose - last).norm(dim=-1).flatten()
+        still = pose.flatten(0, 1)[change <= change.quantile(self.still_share)].mean(0)
+        if self.rest_seen:
+            self.rest_pose.lerp_(still, self.rest_momentum)
+        else:
+            self.rest_pose.copy_(still)
+            self.rest_seen.fill_(True)
 
     def _origin(self, batch) -> torch.Tensor | float:
         """What the flow's latents are measured from: for a residual model the encoding of the
@@ -279,8 +308,11 @@ class _LatentFlowModel(nn.Module):
 
     def _pose_and_control(self, batch):
         """``pose (B, L, 54)``, the encoded control, and a generator for evaluation's draws
-        (fixed, so that the validation loss is the same every time; None in training)."""
+        (fixed, so that the validation loss is the same every time; None in training). In
+        training, the rest pose follows the batch."""
         (pose,) = batch_parts(batch, {"pose": (POSE_DIM,)}, f"{type(self).__name__}.loss")
+        if self.training and hasattr(self, "rest_pose"):
+            self._track_rest(pose, batch["past_pose"][:, :, -1])
         control = self.control(batch, drop_past=self.training)
         generator = None if self.training else torch.Generator(pose.device).manual_seed(0)
         return pose, control, generator
