@@ -316,6 +316,20 @@ def test_runs_pulled_towards_the_mean_pose_load_as_they_were_trained(config_clas
     assert "rest_pose" not in model.state_dict()
 
 
+def test_two_losses_can_be_summed_before_one_backward(data):
+    """Gradient accumulation: the statistics a model tracks in place while training (the rest
+    pose, the decoder's variance) must not break the graph of a loss not yet differentiated."""
+    _, normaliser, batch, _ = data
+    torch.manual_seed(0)
+    for model in (
+        FlowVAE(FlowVAEConfig(**SIZES)),
+        VariationalFlowVAE(VariationalFlowVAEConfig(**SIZES), normaliser),
+    ):
+        model.loss(batch)  # the first batch initialises ActNorm and sets the rest pose
+        (model.loss(batch)["loss"] + model.loss(batch)["loss"]).backward()
+        assert model.encoder[0].weight.grad.abs().sum() > 0
+
+
 def test_the_rest_pose_is_the_running_mean_of_the_stillest_quarter_of_the_frames(data):
     """The first training batch sets the rest pose to the mean of the quarter of its frames that
     changed least from their last poses; each later batch moves it 5 % of the way to its own."""

@@ -52,13 +52,14 @@ random walk). ``leak`` is the pull: the change is measured from the last latent 
 ``leak`` of the way towards the rest pose's latent ``e(r)``, ``h_t - (e(x_{t-1}) - leak *
 (e(x_{t-1}) - e(r)))``, still a known shift. The flow can learn to undo the pull where the data
 moves away from rest (its control shows the last poses), while the errors it cannot fit now
-decay instead of adding up. The rest pose ``r`` (``rest_pose``) is where the agent spends its
-still moments: the running mean, over the training batches, of the quarter of their frames that
-moved least since the last frame. A pull towards the mean pose instead (``pull_to_rest=False``,
-runs saved before the rest pose existed) aims halfway between rest and gesture, so the flow must
-push against it even where the agent rests, and runs drifted more. (Re-encoding each decoded
-pose as the origin, ``e(d(h'_{t-1}))``, is no remedy: encoder and decoder do not quite undo each
-other, and the errors grow.)
+decay instead of adding up. The rest pose ``r`` (``rest_pose``) is the pose the agent holds
+while still: the running mean, over the training batches, of the quarter of their frames that
+moved least since the last frame. (On the course's data it lies within 2 cm of the mean pose in
+posture, but its latent lies nearer the latents of real poses than ``e(0)`` does: the mean pose's
+numbers are an average of rotations, not a rotation. Runs pulled towards ``e(0)``,
+``pull_to_rest=False``, as runs saved before the rest pose existed were, drifted more.)
+(Re-encoding each decoded pose as the origin, ``e(d(h'_{t-1}))``, is no remedy: encoder and
+decoder do not quite undo each other, and the errors grow.)
 
 Logged scalars (``loss(batch)``), all per frame: :class:`FlowVAE`: ``loss``, ``nll`` (of the
 latent, nats), ``mse`` (of ``d(h)``, per number), ``sample_mse`` (of ``d(h')``; always on the
@@ -285,7 +286,9 @@ class _LatentFlowModel(nn.Module):
         if not self.config.leak:
             return last
         rest = self.rest_pose if hasattr(self, "rest_pose") else last.new_zeros(POSE_DIM)
-        return last - self.config.leak * (last - self.encode(rest.to(last)))
+        # A copy: training moves the buffer in place, which would break this loss's graph if a
+        # second loss came before its backward (gradient accumulation).
+        return last - self.config.leak * (last - self.encode(rest.to(last, copy=True)))
 
     @torch.no_grad()
     def _track_rest(self, pose: torch.Tensor, last: torch.Tensor) -> None:
@@ -418,7 +421,7 @@ class VariationalFlowVAE(_LatentFlowModel):
             with torch.no_grad():
                 batch_variance = error.flatten(0, 1).mean(0)
                 self.decoder_variance.lerp_(batch_variance, self.variance_momentum)
-        variance = self.decoder_variance
+        variance = self.decoder_variance.clone()  # a copy, as the rest pose (_toward_rest)
         log_likelihood = -0.5 * (error / variance + variance.log() + LOG_2PI).sum(-1)
         kl = (log_posterior.sum(1) - log_prior).mean() / length
         reconstruction = -log_likelihood.mean()
