@@ -1,17 +1,23 @@
-"""MoGlow one frame ahead of the true past, against MoGlow running free: where the hands part.
+"""A recurrent flow one frame ahead of the true past, against the flow running free.
 
-For each held-out conversation, every frame of a trained MoGlow (the recipe, with ``--change``)
-is drawn twice: **one step** ahead of the true motion (the flow's memory and control built from
-the recorded past, teacher forcing, as in training) and **free** (``speech_to_motion``: each
-frame fed back, as in use). Over the frames where the agent speaks, it prints for the truth and
-both: the share of wrist-frames slower than 4 cm/s, the share of frames where one hand rests
-(< 4 cm/s) while the other strokes (> 16 cm/s), and the correlation of the two wrists' speeds.
-A model that keeps the hands apart one step ahead but not when running free has learned the
-rule and loses it to its own output (exposure).
+For each held-out conversation, every frame of a trained model (MoGlow's recipe by default; the
+Flow-VAEs' and Ye et al.'s flow too, with ``--change``) is drawn twice: **one step** ahead of
+the true motion (the flow's memory and control built from the recorded past, teacher forcing, as
+in training) and **free** (``speech_to_motion``: each frame fed back, as in use). It prints for
+the truth and both:
+
+* over the frames where the agent speaks, the share of wrist-frames slower than 4 cm/s, the
+  share of frames where one hand rests (< 4 cm/s) while the other strokes (> 16 cm/s), and the
+  correlation of the two wrists' speeds;
+* the listener's nod: the head's downward pitch speed (deg/s) in the 0.6 s after each of the
+  partner's phrase ends that the rules answer with a nod, averaged over them.
+
+A model that does one step ahead what it fails to do running free has learned the rule and
+loses it to its own output (exposure); one that fails one step ahead has not learned it.
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_one_step.py [--change dropout=0.2] [--seed 0] [--quick]
+    .venv/bin/python benchmarks/bench_one_step.py [MODEL] [--change dropout=0.2] [--seed 0]
 """
 
 from __future__ import annotations
@@ -26,13 +32,17 @@ from bench_quality import parse_changes  # this folder is on the path when run a
 from data_synth import course_data, load_dataset
 from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation import hand_sharing
+from gesturelib.evaluation.rules import answered_phrase_ends, head_pitch
 from gesturelib.metrics import JOINT_GROUPS
 from gesturelib.pipeline import speech_to_motion, train_model
+from gesturelib.pose_surface import project
 from gesturelib.recipes import RECIPES
 from gesturelib.sampling import one_step_ahead
 from gesturelib.skeleton import forward_kinematics
 
 REPO = Path(__file__).resolve().parents[1]
+#: The recipes of recurrent flows, which :func:`one_step_ahead` can draw one step ahead.
+RECURRENT_FLOWS = ("moglow", "styleflow", "flowvae", "flowvae_elbo")
 WRISTS = list(JOINT_GROUPS["wrists"])
 
 
@@ -45,21 +55,51 @@ def hands(label: str, speeds: np.ndarray) -> None:
     )
 
 
+#: Frames after a phrase end over which the nod is shown: 0.6 s (the rules nod 0.1-0.35 s
+#: after it, fastest downwards a quarter of a 0.45 s cycle later).
+NOD_FRAMES = int(0.6 * FPS)
+
+
+def nod_speeds(conversation, motion, previous, frames: slice) -> list[np.ndarray]:
+    """The head's downward pitch speed (deg/s) into each of the :data:`NOD_FRAMES` frames after
+    each answered phrase end of the partner, ``(NOD_FRAMES,)`` each, for ``motion`` ``(N, 9, 3)``
+    (the conversation's ``frames``) and the poses ``previous`` ``(N, 9, 3)`` it moved from."""
+    down = np.degrees(head_pitch(motion) - head_pitch(previous)) * FPS
+    rows = []
+    for end in answered_phrase_ends(conversation):
+        first = round(end * FPS) - frames.start
+        if 0 <= first and first + NOD_FRAMES <= len(down):
+            rows.append(down[first : first + NOD_FRAMES])
+    return rows
+
+
+def autoencoded(model, normaliser, rotations: np.ndarray) -> np.ndarray:
+    """Limb rotations ``(T, 9, 6)`` through a Flow-VAE's autoencoder, ``d(e(x))``, on the pose
+    surface: the poses its decoder gives for the recorded ones, from which the change of a
+    one-step draw is measured (from the recorded pose it would include the autoencoder's error)."""
+    pose = torch.as_tensor(normaliser.normalise_pose(rotations.reshape(len(rotations), -1)))
+    with torch.no_grad():
+        decoded = model.decode(model.encode(pose.float())).double().numpy()
+    raw = torch.as_tensor(normaliser.denormalise_pose(decoded)).reshape(rotations.shape)
+    return project(raw).numpy()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("model", nargs="?", default="moglow", choices=RECURRENT_FLOWS)
     parser.add_argument("--change", nargs="*", default=[], help="model config fields: key=value")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quick", action="store_true", help="quick data and configs")
     args = parser.parse_args()
     try:
         changes = parse_changes(args.change)
-        RECIPES["moglow"].settings(args.quick, changes)
+        RECIPES[args.model].settings(args.quick, changes)
     except (TypeError, ValueError) as error:
         parser.error(str(error))
     torch.set_num_threads(1)
     splits = load_dataset(course_data(args.quick))
     trained = train_model(
-        "moglow",
+        args.model,
         splits,
         quick=args.quick,
         seed=args.seed,
@@ -69,7 +109,8 @@ def main() -> None:
     )
     config = trained.model.config
     first = max(config.past_poses, config.speech_past)
-    speeds = {"truth": [], "one step": [], "free": []}
+    names = ("truth", "one step", "free")
+    speeds, nods = {name: [] for name in names}, {name: [] for name in names}
     for conversation in splits["test"]:
         drawn = forward_kinematics(one_step_ahead(trained.model, trained.normaliser, conversation))
         frames = slice(first, first + len(drawn))
@@ -85,19 +126,34 @@ def main() -> None:
             ).rotations[0]
         )
         # Speeds into each frame of `frames`: from the recorded pose before it for the truth
-        # and the one-step draws, from the motion's own pose before it for the free run.
+        # and the one-step draws (for a Flow-VAE's, that pose through its autoencoder), from
+        # the motion's own pose before it for the free run.
         before = conversation.positions[frames.start - 1 : frames.stop - 1]
+        drawn_from = before
+        if callable(getattr(trained.model, "decode", None)):  # a flow over a latent
+            rotations = conversation.rotations[frames.start - 1 : frames.stop - 1]
+            drawn_from = forward_kinematics(
+                autoencoded(trained.model, trained.normaliser, rotations)
+            )
         speaking = conversation.activity[frames] == Activity.A_SPEAKS
         for name, motion, previous in (
             ("truth", conversation.positions[frames], before),
-            ("one step", drawn, before),
+            ("one step", drawn, drawn_from),
             ("free", free[frames], free[frames.start - 1 : frames.stop - 1]),
         ):
             step = motion[:, WRISTS] - previous[:, WRISTS]
             speeds[name].append(np.linalg.norm(step, axis=-1)[speaking] * FPS)
-    print(f"frames where the agent speaks, seed {args.seed} {' '.join(args.change)}")
+            nods[name] += nod_speeds(conversation, motion, previous, frames)
+    print(f"{args.model}, seed {args.seed} {' '.join(args.change)}")
+    print("frames where the agent speaks:")
     for name, parts in speeds.items():
         hands(name, np.concatenate(parts))
+    print(
+        f"the head's downward speed (deg/s) after {len(nods['truth'])} phrase ends of the "
+        f"partner, every {1000 // FPS} ms from 0 to {1000 * (NOD_FRAMES - 1) // FPS} ms:"
+    )
+    for name, rows in nods.items():
+        print(f"{name:>9}: " + " ".join(f"{value:4.0f}" for value in np.mean(rows, axis=0)))
 
 
 if __name__ == "__main__":

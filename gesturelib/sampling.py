@@ -46,6 +46,7 @@ import torch
 from gesturelib.configs import check_temperature
 from gesturelib.conventions import FPS, Activity
 from gesturelib.features import activity_one_hot
+from gesturelib.flows import RecurrentFlow
 from gesturelib.pose_surface import project
 from gesturelib.runtime import device_of, standard_normal
 from gesturelib.skeleton import NUM_JOINTS, POSE_DIM
@@ -370,13 +371,14 @@ def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
     """Every frame of a recording drawn one step ahead of its *recorded* past: the exposure test.
 
     The flow's memory and control are those of the recording (teacher forcing, as in training);
-    each frame's pose is drawn from the flow given them (temperature 1), and the memory then moves
-    on with the recorded pose, not the drawn one. Against :func:`generate`, where every frame is fed
+    each frame is drawn from the flow given them (temperature 1), and the memory then moves on
+    with the recorded frame, not the drawn one. Against :func:`generate`, where every frame is fed
     back, it tells what a model has learned from what it loses to its own output.
 
     Args:
-        model, normaliser: a recurrent flow over poses (MoGlow, Ye et al.'s flow) and its
-            normaliser.
+        model, normaliser: a recurrent flow over poses (MoGlow, Ye et al.'s flow) or over an
+            autoencoder's latent (the Flow-VAEs: the recorded poses are encoded, the drawn
+            latents decoded), and its normaliser.
         recording: as :func:`reference_latents`'s ``reference``.
         seed: of the draws.
     Returns:
@@ -386,27 +388,34 @@ def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
     Raises:
         ValueError: a model that is not a recurrent flow, or a recording too short or malformed.
     """
-    if not callable(getattr(model, "latents", None)):
+    recurrent = isinstance(getattr(model, "flow", None), RecurrentFlow)
+    over_latent = recurrent and callable(getattr(model, "decode", None))
+    if not (over_latent or recurrent and callable(getattr(model, "latents", None))):
         raise ValueError(
-            f"one_step_ahead draws from a recurrent flow over poses (MoGlow, Ye et al.'s flow), "
-            f"not a {type(model).__name__}"
+            f"one_step_ahead draws from a recurrent flow (MoGlow, Ye et al.'s flow, the "
+            f"Flow-VAEs), not a {type(model).__name__}"
         )
     batch = recording_batch(model, normaliser, recording)
-    # The residual flow models the change from the last pose, the recorded one here.
-    origin = (
-        batch["past_pose"][:, :, -1] if model.config.residual else torch.zeros_like(batch["pose"])
-    )
     generator = torch.Generator().manual_seed(seed)
     drawn, state = [], None
     with torch.no_grad(), model.generating():
-        control = model.conditioning(batch)
-        recorded = batch["pose"] - origin
+        if over_latent:
+            control, recorded = model.control(batch), model.encode(batch["pose"])
+        else:
+            control, recorded = model.conditioning(batch), batch["pose"]
+        # What the flow's frames are measured from (the model's own rule: for a residual model
+        # the last recorded pose, or its latent moved towards rest), as a tensor like `recorded`.
+        origin = torch.zeros_like(recorded) + model._origin(batch)
+        recorded = recorded - origin
         for t in range(recorded.shape[1]):
-            noise = standard_normal((1, 1, POSE_DIM), generator, device_of(model))
-            pose, _, _ = model.flow.inverse(noise, control[:, t : t + 1], state)
-            drawn.append(pose[0, 0] + origin[0, t])
+            noise = standard_normal((1, 1, recorded.shape[-1]), generator, device_of(model))
+            frame, _, _ = model.flow.inverse(noise, control[:, t : t + 1], state)
+            drawn.append(frame[0, 0] + origin[0, t])
             _, _, state = model.flow(recorded[:, t : t + 1], control[:, t : t + 1], state)
-    raw = normaliser.denormalise_pose(torch.stack(drawn).double().cpu().numpy())
+        poses = torch.stack(drawn)
+        if over_latent:
+            poses = model.decode(poses)
+    raw = normaliser.denormalise_pose(poses.double().cpu().numpy())
     return project(torch.as_tensor(raw).reshape(-1, NUM_JOINTS, 6)).numpy()
 
 

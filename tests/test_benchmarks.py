@@ -113,16 +113,21 @@ def test_the_quality_benchmark_scores_each_seed_and_their_spread():
     assert refused.returncode == 2 and "unexpected keyword argument 'lek'" in refused.stderr
 
 
-def test_the_one_step_benchmark_measures_the_hands_of_truth_one_step_and_free_motion():
-    output = run("bench_one_step.py", "--quick", "--change", "dropout=0.2")
+def test_the_one_step_benchmark_measures_hands_and_nods_of_truth_one_step_and_free_motion():
+    output = run("bench_one_step.py", "flowvae", "--quick", "--change", "dropout=0.2")
+    assert output.splitlines()[0] == "flowvae, seed 0 dropout=0.2", output
     for name in ("truth", "one step", "free"):
         assert re.search(
             rf"{name}: wrists still 0\.\d\d  one rests, one strokes 0\.\d\d  "
             rf"speed correlation -?[01]\.\d\d",
             output,
         ), (name, output)
+        assert re.search(rf"{name}: (\s+-?\d+){{15}}$", output, re.MULTILINE), (name, output)
+    assert re.search(r"after \d+ phrase ends of the partner, every 40 ms from 0 to 560 ms", output)
     refused = launch("bench_one_step.py", "--quick", "--change", "dropot=0.2")
     assert refused.returncode == 2 and "dropot" in refused.stderr
+    refused = launch("bench_one_step.py", "aud2pose", "--quick")
+    assert refused.returncode == 2 and "invalid choice: 'aud2pose'" in refused.stderr
 
 
 def test_the_video_benchmark_times_each_write():

@@ -13,6 +13,8 @@ from gesturelib.checkpoints import CheckpointMismatchError, load_model
 from gesturelib.configs import config_from_dict, config_to_dict
 from gesturelib.features import speech_features
 from gesturelib.models import (
+    CVAE,
+    CVAEConfig,
     FlowVAE,
     FlowVAEConfig,
     MoGlow,
@@ -20,6 +22,7 @@ from gesturelib.models import (
     VariationalFlowVAEConfig,
 )
 from gesturelib.models.flowvae import latent_scale
+from gesturelib.pose_surface import project
 from gesturelib.sampling import generate
 from gesturelib.train import TrainConfig, train
 
@@ -124,6 +127,38 @@ def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config, 
             steps.append(last)
         latents = torch.cat(steps, dim=1)
     torch.testing.assert_close(stepped, model.decode(latents))
+
+
+@pytest.mark.parametrize(
+    "config", [FlowVAEConfig(**SIZES), dataclasses.replace(ELBO, residual=True, leak=0.2)]
+)
+def test_one_step_ahead_decodes_teacher_forced_latent_draws(data, config, monkeypatch):
+    """Given the base codes of the recording's own latents for noise, every one-step draw is the
+    recorded pose through the autoencoder, ``d(e(x_t))``: the flow's memory and the origin move
+    on with the recording; with random noise, the draws are seeded poses on the surface."""
+    import gesturelib.sampling as sampling
+
+    conversation, normaliser, batch, _ = data
+    model = build(config, normaliser, batch)
+    drawn = sampling.one_step_ahead(model, normaliser, conversation, seed=3)
+    np.testing.assert_allclose(project(torch.as_tensor(drawn)).numpy(), drawn, atol=1e-6)
+    np.testing.assert_array_equal(
+        drawn, sampling.one_step_ahead(model, normaliser, conversation, 3)
+    )
+    assert not np.allclose(drawn, sampling.one_step_ahead(model, normaliser, conversation, 4))
+
+    recording = sampling.recording_batch(model, normaliser, conversation)
+    with torch.no_grad():
+        latent = model.encode(recording["pose"])
+        codes, _, _ = model.flow(latent - model._origin(recording), model.control(recording))
+        raw = normaliser.denormalise_pose(model.decode(latent)[0].double().numpy())
+    rows = iter(codes[0])
+    monkeypatch.setattr(sampling, "standard_normal", lambda shape, *_: next(rows).reshape(shape))
+    replayed = sampling.one_step_ahead(model, normaliser, conversation)
+    assert replayed.shape == drawn.shape == (codes.shape[1], 9, 6)
+    np.testing.assert_allclose(replayed, project(torch.as_tensor(raw).reshape(-1, 9, 6)), atol=1e-5)
+    with pytest.raises(ValueError, match="recurrent flow"):  # an autoencoder, but no flow
+        sampling.one_step_ahead(CVAE(CVAEConfig.quick()), normaliser, conversation)
 
 
 @pytest.mark.parametrize("residual, leak", [(False, 0.0), (True, 0.0), (True, 0.3)])
