@@ -32,7 +32,7 @@ from bench_quality import parse_changes  # this folder is on the path when run a
 from data_synth import course_data, load_dataset
 from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation import hand_sharing
-from gesturelib.evaluation.rules import answered_phrase_ends, head_pitch
+from gesturelib.evaluation.rules import head_drops_after_phrase_ends
 from gesturelib.metrics import JOINT_GROUPS
 from gesturelib.pipeline import speech_to_motion, train_model
 from gesturelib.pose_surface import project
@@ -53,24 +53,6 @@ def hands(label: str, speeds: np.ndarray) -> None:
         f"{label:>9}: wrists still {shared['still']:.2f}  one rests, one strokes "
         f"{shared['one_hand']:.2f}  speed correlation {shared['correlation']:.2f}"
     )
-
-
-#: Frames after a phrase end over which the nod is shown: 0.6 s (the rules nod 0.1-0.35 s
-#: after it, fastest downwards a quarter of a 0.45 s cycle later).
-NOD_FRAMES = int(0.6 * FPS)
-
-
-def nod_speeds(conversation, motion, previous, frames: slice) -> list[np.ndarray]:
-    """The head's downward pitch speed (deg/s) into each of the :data:`NOD_FRAMES` frames after
-    each answered phrase end of the partner, ``(NOD_FRAMES,)`` each, for ``motion`` ``(N, 9, 3)``
-    (the conversation's ``frames``) and the poses ``previous`` ``(N, 9, 3)`` it moved from."""
-    down = np.degrees(head_pitch(motion) - head_pitch(previous)) * FPS
-    rows = []
-    for end in answered_phrase_ends(conversation):
-        first = round(end * FPS) - frames.start
-        if 0 <= first and first + NOD_FRAMES <= len(down):
-            rows.append(down[first : first + NOD_FRAMES])
-    return rows
 
 
 def autoencoded(model, normaliser, rotations: np.ndarray) -> np.ndarray:
@@ -143,17 +125,18 @@ def main() -> None:
         ):
             step = motion[:, WRISTS] - previous[:, WRISTS]
             speeds[name].append(np.linalg.norm(step, axis=-1)[speaking] * FPS)
-            nods[name] += nod_speeds(conversation, motion, previous, frames)
+            nods[name].append(head_drops_after_phrase_ends(conversation, motion, previous, first))
     print(f"{args.model}, seed {args.seed} {' '.join(args.change)}")
     print("frames where the agent speaks:")
     for name, parts in speeds.items():
         hands(name, np.concatenate(parts))
+    drops = {name: np.concatenate(rows) for name, rows in nods.items()}
     print(
-        f"the head's downward speed (deg/s) after {len(nods['truth'])} phrase ends of the "
-        f"partner, every {1000 // FPS} ms from 0 to {1000 * (NOD_FRAMES - 1) // FPS} ms:"
+        f"the head's downward speed (deg/s) after {len(drops['truth'])} phrase ends of the "
+        f"partner, every {1000 // FPS} ms from 0 to {1000 * (drops['truth'].shape[1] - 1) // FPS} ms:"
     )
-    for name, rows in nods.items():
-        print(f"{name:>9}: " + " ".join(f"{value:4.0f}" for value in np.mean(rows, axis=0)))
+    for name, rows in drops.items():
+        print(f"{name:>9}: " + " ".join(f"{value:4.0f}" for value in rows.mean(axis=0)))
 
 
 if __name__ == "__main__":

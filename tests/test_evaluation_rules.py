@@ -13,6 +13,7 @@ from gesturelib.evaluation.rules import (
     accent_leads,
     answered_phrase_ends,
     beat_alignment_score,
+    head_drops_after_phrase_ends,
     head_pitch,
     kinematic_beats,
     nod_times,
@@ -125,6 +126,22 @@ def test_listening_nods_count_only_in_the_rules_window():
     np.testing.assert_array_equal(
         on_rule_nods(conversation, with_nods([on_time, late], 250)), [True, False]
     )
+
+
+def test_head_drops_are_the_downward_pitch_speed_after_each_answered_phrase_end():
+    ends = [2.0, 5.0, 8.0, 9.8]  # the agent answers the third; the fourth's window runs past
+    conversation = fake_conversation(partner_ends=ends, agent_phrases=[(8.2, 9.0)])
+    motion = with_nods([2.3], 250)
+    pitch = np.degrees(head_pitch(motion))
+    drops = head_drops_after_phrase_ends(conversation, motion[1:], motion[:-1], first=1)
+    assert drops.shape == (2, 15)  # the ends at 2 and 5 s, 0.6 s (15 frames) each
+    np.testing.assert_allclose(drops[0], np.diff(pitch)[49:64] * FPS)  # frames 50 to 64
+    np.testing.assert_allclose(drops[1], 0.0, atol=1e-9)  # no nod after the second end
+    assert drops[0].argmax() == round(2.3 * FPS) - 50 and drops[0].max() > 50
+    # Drawn frames move from the frames given as `previous`, and `first` places them in time:
+    # the same frames, starting later, leave out the first end.
+    shifted = head_drops_after_phrase_ends(conversation, motion[60:], motion[59:-1], first=60)
+    np.testing.assert_allclose(shifted, drops[1:])
 
 
 def test_beat_alignment_follows_bailandos_formula():

@@ -176,6 +176,33 @@ def partner_nods(conversation, positions: np.ndarray) -> np.ndarray:
     )
 
 
+def head_drops_after_phrase_ends(
+    conversation, positions: np.ndarray, previous: np.ndarray, first: int, seconds: float = 0.6
+) -> np.ndarray:
+    """The head's downward pitch speed (deg/s) into each frame of the ``seconds`` after each of
+    the partner's phrase ends that the agent answers with silence (:func:`answered_phrase_ends`),
+    the window a listening nod falls in: ``(E, round(seconds * fps))``, one row an end (the ends
+    whose window ``positions`` does not cover are left out).
+
+    Args:
+        conversation: a :class:`data_synth.Conversation` (its events and frame rate).
+        positions: keypoints ``(N, 9, 3)`` of the conversation's frames ``first`` to
+            ``first + N - 1``.
+        previous: the keypoints ``(N, 9, 3)`` each frame moved from: the frame before it, or,
+            for a frame drawn one step ahead of a recording, the recorded frame before it.
+        first: the conversation's frame that ``positions[0]`` is.
+    """
+    fps = conversation.fps
+    down = np.degrees(head_pitch(positions) - head_pitch(previous)) * fps
+    frames = round(seconds * fps)
+    rows = []
+    for end in answered_phrase_ends(conversation):
+        start = round(end * fps) - first
+        if 0 <= start and start + frames <= len(down):
+            rows.append(down[start : start + frames])
+    return np.asarray(rows, dtype=np.float64).reshape(-1, frames)
+
+
 def on_rule_nods(conversation, positions: np.ndarray) -> np.ndarray:
     """For each nod found in ``positions`` (:func:`nod_times`), whether it lies in a window where
     the rules put a nod (:func:`nod_windows`, every cause): ``(N,)`` bool."""
