@@ -13,7 +13,7 @@ Prints one Markdown table (the one in ``docs/benchmarks.md``) and the median rat
 
 Usage (the shipped models by default; any run folders of generative models otherwise)::
 
-    .venv/bin/python benchmarks/bench_own_voice.py [RUN ...] [--samples 3]
+    .venv/bin/python benchmarks/bench_own_voice.py [RUN ...] [--samples 3] [--temperature 0.8]
 """
 
 from __future__ import annotations
@@ -32,10 +32,15 @@ from gesturelib.pretrained import NAMES, load_run, pretrained_folder
 VOICES = Path(__file__).resolve().parents[1] / "tests" / "data" / "voices"
 
 
-def on_recording(model, normaliser, recording: Path, samples: int) -> tuple[float, list[float]]:
-    """``(speaking/silence ratio, one stroke lead per sample)`` of a model on ``recording``."""
+def on_recording(
+    model, normaliser, recording: Path, samples: int, temperature: float | None = None
+) -> tuple[float, list[float]]:
+    """``(speaking/silence ratio, one stroke lead per sample)`` of a model on ``recording`` (at
+    ``temperature``, or the model's own)."""
     audio, rate = load_audio(recording)
-    motion = speech_to_motion(model, normaliser, audio, rate, samples=samples, seed=0)
+    motion = speech_to_motion(
+        model, normaliser, audio, rate, samples=samples, temperature=temperature, seed=0
+    )
     activity = motion.activity
     ratio = speaking_listening_ratio(list(motion.positions), [activity] * samples)
     return ratio, [stroke_lead(audio, rate, activity, m) for m in motion.positions]
@@ -45,6 +50,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="*", type=Path, help="run folders (default: shipped models)")
     parser.add_argument("--samples", type=int, default=3, help="samples per recording")
+    parser.add_argument("--temperature", type=float, default=None, help="the model's own if unset")
     args = parser.parse_args()
     if args.samples < 1:
         parser.error(f"--samples must be at least 1, got {args.samples}")
@@ -61,7 +67,9 @@ def main() -> None:
             raise SystemExit(
                 f"{run} holds a {type(model).__name__}, which does not generate motion"
             )
-        results[run.name] = [on_recording(model, normaliser, r, args.samples) for r in recordings]
+        results[run.name] = [
+            on_recording(model, normaliser, r, args.samples, args.temperature) for r in recordings
+        ]
 
     header = " | ".join(f"{name} ratio | {name} leads (s)" for name in results)
     print(f"| recording | {header} |")

@@ -88,6 +88,11 @@ def test_own_voice_benchmark_reports_each_recording():
     ratios = [float(row.split("|")[2]) for row in rows]
     median = re.search(r"moglow: median ratio ([0-9.]+)", output)
     assert median and float(median[1]) == pytest.approx(sorted(ratios)[2], abs=0.006)
+    # At T = 0 every sample of a recording is the same motion: the same leads.
+    output = run("bench_own_voice.py", "gesturelib/pretrained/flowvae", "--temperature", "0")
+    rows = [line for line in output.splitlines() if line.startswith("| `")]
+    leads = [{lead.strip() for lead in row.split("|")[3].split(",")} for row in rows]
+    assert len(rows) == 5 and all(len(same) == 1 for same in leads), rows
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")
