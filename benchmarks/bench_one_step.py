@@ -1,19 +1,22 @@
 """A recurrent flow one frame ahead of the true past, against the flow running free.
 
-For each held-out conversation, every frame of a trained model (MoGlow's recipe by default; the
-Flow-VAEs' and Ye et al.'s flow too, with ``--change``) is drawn twice: **one step** ahead of
-the true motion (the flow's memory and control built from the recorded past, teacher forcing, as
-in training) and **free** (``speech_to_motion``: each frame fed back, as in use). It prints for
-the truth and both:
+For each held-out conversation, every frame of a trained model (``MODEL``: MoGlow's recipe by
+default, or Ye et al.'s flow's or a Flow-VAE's; ``--change`` alters its config) is drawn twice:
+**one step** ahead of the true motion (the flow's memory and control built from the recorded
+past, teacher forcing, as in training) and **free** (``speech_to_motion``: each frame fed back, as
+in use). It prints for the truth and both:
 
 * over the frames where the agent speaks, the share of wrist-frames slower than 4 cm/s, the
   share of frames where one hand rests (< 4 cm/s) while the other strokes (> 16 cm/s), and the
   correlation of the two wrists' speeds;
 * the listener's nod: the head's downward pitch speed (deg/s) in the 0.6 s after each of the
-  partner's phrase ends that the rules answer with a nod, averaged over them.
+  partner's phrase ends that the agent answers with silence (where the rules nod, most of the
+  time), averaged over them.
 
-A model that does one step ahead what it fails to do running free has learned the rule and
-loses it to its own output (exposure); one that fails one step ahead has not learned it.
+A one-step frame's speed is measured from the recorded frame before it (for a Flow-VAE, that
+frame through its autoencoder), a free frame's from the model's own. A model that does one step
+ahead what it fails to do running free has learned the rule and loses it to its own output
+(exposure); one that fails one step ahead has not learned it.
 
 Usage::
 
@@ -35,9 +38,8 @@ from gesturelib.evaluation import hand_sharing
 from gesturelib.evaluation.rules import head_drops_after_phrase_ends
 from gesturelib.metrics import JOINT_GROUPS
 from gesturelib.pipeline import speech_to_motion, train_model
-from gesturelib.pose_surface import project
 from gesturelib.recipes import RECIPES
-from gesturelib.sampling import one_step_ahead
+from gesturelib.sampling import one_step_ahead, through_autoencoder
 from gesturelib.skeleton import forward_kinematics
 
 REPO = Path(__file__).resolve().parents[1]
@@ -53,17 +55,6 @@ def hands(label: str, speeds: np.ndarray) -> None:
         f"{label:>9}: wrists still {shared['still']:.2f}  one rests, one strokes "
         f"{shared['one_hand']:.2f}  speed correlation {shared['correlation']:.2f}"
     )
-
-
-def autoencoded(model, normaliser, rotations: np.ndarray) -> np.ndarray:
-    """Limb rotations ``(T, 9, 6)`` through a Flow-VAE's autoencoder, ``d(e(x))``, on the pose
-    surface: the poses its decoder gives for the recorded ones, from which the change of a
-    one-step draw is measured (from the recorded pose it would include the autoencoder's error)."""
-    pose = torch.as_tensor(normaliser.normalise_pose(rotations.reshape(len(rotations), -1)))
-    with torch.no_grad():
-        decoded = model.decode(model.encode(pose.float())).double().numpy()
-    raw = torch.as_tensor(normaliser.denormalise_pose(decoded)).reshape(rotations.shape)
-    return project(raw).numpy()
 
 
 def main() -> None:
@@ -112,10 +103,10 @@ def main() -> None:
         # the motion's own pose before it for the free run.
         before = conversation.positions[frames.start - 1 : frames.stop - 1]
         drawn_from = before
-        if callable(getattr(trained.model, "decode", None)):  # a flow over a latent
+        if args.model.startswith("flowvae"):  # a flow over an autoencoder's latent
             rotations = conversation.rotations[frames.start - 1 : frames.stop - 1]
             drawn_from = forward_kinematics(
-                autoencoded(trained.model, trained.normaliser, rotations)
+                through_autoencoder(trained.model, trained.normaliser, rotations)
             )
         speaking = conversation.activity[frames] == Activity.A_SPEAKS
         for name, motion, previous in (
@@ -136,7 +127,7 @@ def main() -> None:
         f"partner, every {1000 // FPS} ms from 0 to {1000 * (drops['truth'].shape[1] - 1) // FPS} ms:"
     )
     for name, rows in drops.items():
-        print(f"{name:>9}: " + " ".join(f"{value:4.0f}" for value in rows.mean(axis=0)))
+        print(f"{name:>9}: " + " ".join(f"{round(value):4d}" for value in rows.mean(axis=0)))
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from gesturelib.configs import check_temperature
 from gesturelib.evaluation import speaking_listening_ratio, stroke_lead
 from gesturelib.features import load_audio
 from gesturelib.pipeline import speech_to_motion
@@ -54,6 +55,11 @@ def main() -> None:
     args = parser.parse_args()
     if args.samples < 1:
         parser.error(f"--samples must be at least 1, got {args.samples}")
+    if args.temperature is not None:
+        try:
+            check_temperature(args.temperature)
+        except ValueError as error:
+            parser.error(f"--temperature: {error}")
     runs = args.runs or [pretrained_folder(name) for name in NAMES]
     if len({run.name for run in runs}) < len(runs):
         parser.error("give run folders of different names: the table is headed by them")

@@ -388,9 +388,11 @@ def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
     Raises:
         ValueError: a model that is not a recurrent flow, or a recording too short or malformed.
     """
-    recurrent = isinstance(getattr(model, "flow", None), RecurrentFlow)
-    over_latent = recurrent and callable(getattr(model, "decode", None))
-    if not (over_latent or recurrent and callable(getattr(model, "latents", None))):
+    over_latent = _over_latent(model)
+    over_poses = isinstance(getattr(model, "flow", None), RecurrentFlow) and callable(
+        getattr(model, "latents", None)
+    )
+    if not (over_latent or over_poses):
         raise ValueError(
             f"one_step_ahead draws from a recurrent flow (MoGlow, Ye et al.'s flow, the "
             f"Flow-VAEs), not a {type(model).__name__}"
@@ -417,6 +419,35 @@ def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
             poses = model.decode(poses)
     raw = normaliser.denormalise_pose(poses.double().cpu().numpy())
     return project(torch.as_tensor(raw).reshape(-1, NUM_JOINTS, 6)).numpy()
+
+
+def through_autoencoder(model, normaliser, rotations: np.ndarray) -> np.ndarray:
+    """Limb rotations ``(T, 9, 6)`` through a Flow-VAE's autoencoder, ``d(e(x))``, on the pose
+    surface: the poses its decoder gives for recorded ones. A frame :func:`one_step_ahead` draws
+    for a Flow-VAE moved from the last recorded pose *as decoded*; measured from the recorded
+    pose itself, its change would also hold the autoencoder's error.
+
+    Raises:
+        ValueError: a model that is not a flow over an autoencoder's latent.
+    """
+    if not (_over_latent(model) and callable(getattr(model, "encode", None))):
+        raise ValueError(
+            f"through_autoencoder needs a Flow-VAE (a flow over an autoencoder's latent), not a "
+            f"{type(model).__name__}"
+        )
+    rotations = np.asarray(rotations)
+    pose = torch.as_tensor(normaliser.normalise_pose(rotations.reshape(len(rotations), -1)))
+    with torch.no_grad():
+        decoded = model.decode(model.encode(pose.float().to(device_of(model))))
+    raw = normaliser.denormalise_pose(decoded.double().cpu().numpy())
+    return project(torch.as_tensor(raw).reshape(rotations.shape)).numpy()
+
+
+def _over_latent(model) -> bool:
+    """Whether ``model`` is a recurrent flow over an autoencoder's latent (the Flow-VAEs)."""
+    return isinstance(getattr(model, "flow", None), RecurrentFlow) and callable(
+        getattr(model, "decode", None)
+    )
 
 
 def recording_batch(model, normaliser, recording) -> dict[str, torch.Tensor]:

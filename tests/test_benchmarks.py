@@ -93,6 +93,8 @@ def test_own_voice_benchmark_reports_each_recording():
     rows = [line for line in output.splitlines() if line.startswith("| `")]
     leads = [{lead.strip() for lead in row.split("|")[3].split(",")} for row in rows]
     assert len(rows) == 5 and all(len(same) == 1 for same in leads), rows
+    refused = launch("bench_own_voice.py", "--temperature", "-1")
+    assert refused.returncode == 2 and "--temperature: temperature must lie in" in refused.stderr
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")
@@ -118,9 +120,10 @@ def test_the_quality_benchmark_scores_each_seed_and_their_spread():
     assert refused.returncode == 2 and "unexpected keyword argument 'lek'" in refused.stderr
 
 
-def test_the_one_step_benchmark_measures_hands_and_nods_of_truth_one_step_and_free_motion():
-    output = run("bench_one_step.py", "flowvae", "--quick", "--change", "dropout=0.2")
-    assert output.splitlines()[0] == "flowvae, seed 0 dropout=0.2", output
+@pytest.mark.parametrize("model", ["moglow", "flowvae"])
+def test_the_one_step_benchmark_measures_hands_and_nods_of_truth_one_step_and_free_motion(model):
+    output = run("bench_one_step.py", model, "--quick", "--change", "dropout=0.2")
+    assert output.splitlines()[0] == f"{model}, seed 0 dropout=0.2", output
     for name in ("truth", "one step", "free"):
         assert re.search(
             rf"{name}: wrists still 0\.\d\d  one rests, one strokes 0\.\d\d  "

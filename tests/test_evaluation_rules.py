@@ -142,6 +142,8 @@ def test_head_drops_are_the_downward_pitch_speed_after_each_answered_phrase_end(
     # the same frames, starting later, leave out the first end.
     shifted = head_drops_after_phrase_ends(conversation, motion[60:], motion[59:-1], first=60)
     np.testing.assert_allclose(shifted, drops[1:])
+    with pytest.raises(ValueError, match="one previous frame per frame"):
+        head_drops_after_phrase_ends(conversation, motion[1:], motion, first=1)
 
 
 def test_beat_alignment_follows_bailandos_formula():

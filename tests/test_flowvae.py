@@ -18,6 +18,7 @@ from gesturelib.models import (
     FlowVAE,
     FlowVAEConfig,
     MoGlow,
+    MoGlowConfig,
     VariationalFlowVAE,
     VariationalFlowVAEConfig,
 )
@@ -130,12 +131,13 @@ def test_the_latent_flow_agrees_teacher_forced_and_frame_by_frame(data, config, 
 
 
 @pytest.mark.parametrize(
-    "config", [FlowVAEConfig(**SIZES), dataclasses.replace(ELBO, residual=True, leak=0.2)]
+    "config", [FlowVAEConfig(**SIZES), PAPER, dataclasses.replace(ELBO, residual=True, leak=0.2)]
 )
 def test_one_step_ahead_decodes_teacher_forced_latent_draws(data, config, monkeypatch):
     """Given the base codes of the recording's own latents for noise, every one-step draw is the
-    recorded pose through the autoencoder, ``d(e(x_t))``: the flow's memory and the origin move
-    on with the recording; with random noise, the draws are seeded poses on the surface."""
+    recorded pose through the autoencoder, ``d(e(x_t))``; given other noise at one frame, only
+    that frame changes: the flow's memory and the origin move on with the recording, not with
+    the draws. With random noise, the draws are seeded poses on the surface."""
     import gesturelib.sampling as sampling
 
     conversation, normaliser, batch, _ = data
@@ -151,14 +153,35 @@ def test_one_step_ahead_decodes_teacher_forced_latent_draws(data, config, monkey
     with torch.no_grad():
         latent = model.encode(recording["pose"])
         codes, _, _ = model.flow(latent - model._origin(recording), model.control(recording))
-        raw = normaliser.denormalise_pose(model.decode(latent)[0].double().numpy())
-    rows = iter(codes[0])
-    monkeypatch.setattr(sampling, "standard_normal", lambda shape, *_: next(rows).reshape(shape))
-    replayed = sampling.one_step_ahead(model, normaliser, conversation)
+    first = max(config.past_poses, config.speech_past)
+    recorded = conversation.rotations[first : first + codes.shape[1]]
+    decoded = sampling.through_autoencoder(model, normaliser, recorded)
+
+    def replay(changed_frame=None):
+        rows = iter(codes[0].clone())
+        frames = iter(range(codes.shape[1]))
+
+        def noise(shape, *_):
+            code = next(rows)
+            return code + 100.0 if next(frames) == changed_frame else code
+
+        monkeypatch.setattr(
+            sampling, "standard_normal", lambda shape, *a: noise(shape).reshape(shape)
+        )
+        return sampling.one_step_ahead(model, normaliser, conversation)
+
+    replayed = replay()
     assert replayed.shape == drawn.shape == (codes.shape[1], 9, 6)
-    np.testing.assert_allclose(replayed, project(torch.as_tensor(raw).reshape(-1, 9, 6)), atol=1e-5)
+    np.testing.assert_allclose(replayed, decoded, atol=1e-5)
+    changed = replay(changed_frame=3)
+    assert not np.allclose(changed[3], decoded[3], atol=1e-4)
+    np.testing.assert_allclose(
+        np.delete(changed, 3, axis=0), np.delete(decoded, 3, axis=0), atol=1e-5
+    )
     with pytest.raises(ValueError, match="recurrent flow"):  # an autoencoder, but no flow
         sampling.one_step_ahead(CVAE(CVAEConfig.quick()), normaliser, conversation)
+    with pytest.raises(ValueError, match="needs a Flow-VAE"):
+        sampling.through_autoencoder(MoGlow(MoGlowConfig.quick()), normaliser, recorded)
 
 
 @pytest.mark.parametrize("residual, leak", [(False, 0.0), (True, 0.0), (True, 0.3)])

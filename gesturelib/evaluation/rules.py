@@ -191,7 +191,14 @@ def head_drops_after_phrase_ends(
         previous: the keypoints ``(N, 9, 3)`` each frame moved from: the frame before it, or,
             for a frame drawn one step ahead of a recording, the recorded frame before it.
         first: the conversation's frame that ``positions[0]`` is.
+    Raises:
+        ValueError: ``positions`` and ``previous`` of different shapes.
     """
+    if np.shape(positions) != np.shape(previous):
+        raise ValueError(
+            f"positions and previous must be alike, one previous frame per frame: got "
+            f"{np.shape(positions)} and {np.shape(previous)}"
+        )
     fps = conversation.fps
     down = np.degrees(head_pitch(positions) - head_pitch(previous)) * fps
     frames = round(seconds * fps)
