@@ -388,11 +388,8 @@ def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
     Raises:
         ValueError: a model that is not a recurrent flow, or a recording too short or malformed.
     """
-    over_latent = _over_latent(model)
-    over_poses = isinstance(getattr(model, "flow", None), RecurrentFlow) and callable(
-        getattr(model, "latents", None)
-    )
-    if not (over_latent or over_poses):
+    kind = _recurrent_flow(model)
+    if kind is None:
         raise ValueError(
             f"one_step_ahead draws from a recurrent flow (MoGlow, Ye et al.'s flow, the "
             f"Flow-VAEs), not a {type(model).__name__}"
@@ -400,6 +397,7 @@ def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
     batch = recording_batch(model, normaliser, recording)
     generator = torch.Generator().manual_seed(seed)
     drawn, state = [], None
+    over_latent = kind == "latent"
     with torch.no_grad(), model.generating():
         if over_latent:
             control, recorded = model.control(batch), model.encode(batch["pose"])
@@ -417,8 +415,7 @@ def one_step_ahead(model, normaliser, recording, seed: int = 0) -> np.ndarray:
         poses = torch.stack(drawn)
         if over_latent:
             poses = model.decode(poses)
-    raw = normaliser.denormalise_pose(poses.double().cpu().numpy())
-    return project(torch.as_tensor(raw).reshape(-1, NUM_JOINTS, 6)).numpy()
+    return _on_surface(normaliser, poses)
 
 
 def through_autoencoder(model, normaliser, rotations: np.ndarray) -> np.ndarray:
@@ -430,7 +427,7 @@ def through_autoencoder(model, normaliser, rotations: np.ndarray) -> np.ndarray:
     Raises:
         ValueError: a model that is not a flow over an autoencoder's latent.
     """
-    if not (_over_latent(model) and callable(getattr(model, "encode", None))):
+    if _recurrent_flow(model) != "latent":
         raise ValueError(
             f"through_autoencoder needs a Flow-VAE (a flow over an autoencoder's latent), not a "
             f"{type(model).__name__}"
@@ -439,15 +436,23 @@ def through_autoencoder(model, normaliser, rotations: np.ndarray) -> np.ndarray:
     pose = torch.as_tensor(normaliser.normalise_pose(rotations.reshape(len(rotations), -1)))
     with torch.no_grad():
         decoded = model.decode(model.encode(pose.float().to(device_of(model))))
-    raw = normaliser.denormalise_pose(decoded.double().cpu().numpy())
-    return project(torch.as_tensor(raw).reshape(rotations.shape)).numpy()
+    return _on_surface(normaliser, decoded)
 
 
-def _over_latent(model) -> bool:
-    """Whether ``model`` is a recurrent flow over an autoencoder's latent (the Flow-VAEs)."""
-    return isinstance(getattr(model, "flow", None), RecurrentFlow) and callable(
-        getattr(model, "decode", None)
-    )
+def _recurrent_flow(model) -> str | None:
+    """``"latent"`` for a recurrent flow over an autoencoder's latent (the Flow-VAEs),
+    ``"poses"`` for one over poses (MoGlow, Ye et al.'s flow), None for any other model."""
+    if not isinstance(getattr(model, "flow", None), RecurrentFlow):
+        return None
+    if callable(getattr(model, "decode", None)) and callable(getattr(model, "encode", None)):
+        return "latent"
+    return "poses" if callable(getattr(model, "latents", None)) else None
+
+
+def _on_surface(normaliser, poses: torch.Tensor) -> np.ndarray:
+    """Normalised poses ``(N, 54)`` as limb rotations ``(N, 9, 6)`` on the pose surface."""
+    raw = normaliser.denormalise_pose(poses.double().cpu().numpy())
+    return project(torch.as_tensor(raw).reshape(-1, NUM_JOINTS, 6)).numpy()
 
 
 def recording_batch(model, normaliser, recording) -> dict[str, torch.Tensor]:

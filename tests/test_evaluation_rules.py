@@ -3,11 +3,13 @@ on signals whose answer is known by construction."""
 
 from types import SimpleNamespace
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
 from data_synth.config import MotionConfig
 from data_synth.events import Accent, Events, Phrase
+from gesturelib.evaluation.figures import plot_head_drops
 from gesturelib.evaluation.rules import (
     BEAT_SIGMA_S,
     accent_leads,
@@ -144,6 +146,12 @@ def test_head_drops_are_the_downward_pitch_speed_after_each_answered_phrase_end(
     np.testing.assert_allclose(shifted, drops[1:])
     with pytest.raises(ValueError, match="one previous frame per frame"):
         head_drops_after_phrase_ends(conversation, motion[1:], motion, first=1)
+    figure = plot_head_drops({"nodding": drops[0], "still": drops[1]})
+    lines = figure.axes[0].get_lines()
+    assert [line.get_label() for line in lines] == ["nodding", "still"]
+    np.testing.assert_allclose(lines[0].get_xdata(), np.arange(15) * 40.0)  # ms after the end
+    np.testing.assert_allclose(lines[0].get_ydata(), drops[0])
+    plt.close(figure)
 
 
 def test_beat_alignment_follows_bailandos_formula():

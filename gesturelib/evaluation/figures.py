@@ -132,6 +132,21 @@ def plot_hands(motions: dict, activity: np.ndarray, seconds: float = 12.0) -> pl
     return fig
 
 
+def plot_head_drops(drops: dict) -> plt.Figure:
+    """The head's mean downward speed after the partner's phrase ends, one line per system
+    (``drops``: a system's name to its curve ``(F,)`` in deg/s, one value a frame from the end
+    on, e.g. the mean over the rows of
+    :func:`~gesturelib.evaluation.rules.head_drops_after_phrase_ends`): when a listening nod
+    begins, and how fast it goes."""
+    fig, ax = plt.subplots(figsize=(8, 3))
+    for name, curve in drops.items():
+        ax.plot(np.arange(len(curve)) * 1000 / FPS, curve, marker=".", label=name)
+    ax.set(xlabel="time after the partner's phrase end (ms)", ylabel="downward speed (°/s)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.tight_layout()
+    return fig
+
+
 def plot_speaking_listening(motions: dict, conversations, mean_pose: np.ndarray) -> plt.Figure:
     """Box plots of how fast the keypoints move towards or away from ``mean_pose`` (the size of
     the change of their distance from it, cm/s, mean over keypoints), while the agent speaks and
