@@ -71,6 +71,17 @@ def parse_changes(pairs: list[str]) -> dict:
     return changes
 
 
+def fgd_features(splits, quick: bool):
+    """The FGD's feature network of the course's data (trained once, then cached)."""
+    return feature_network(
+        [c.positions for c in splits["train"]],
+        [c.positions for c in splits["val"]],
+        REPO / "checkpoints",
+        quick=quick,
+        progress=False,
+    )
+
+
 def head_speed(motions: list) -> float:
     """The 99th percentile of the head's downward pitch speed (deg/s) over every frame: how
     fast the fastest nods go (the generator's nods peak at 50-150)."""
@@ -143,13 +154,7 @@ def main() -> None:
     torch.set_num_threads(1)
     splits = load_dataset(course_data(args.quick))
     test = splits["test"]
-    features = feature_network(
-        [c.positions for c in splits["train"]],
-        [c.positions for c in splits["val"]],
-        REPO / "checkpoints",
-        quick=args.quick,
-        progress=False,
-    )
+    features = fgd_features(splits, args.quick)
     truth = [c.positions for c in test]
     print(
         f"ground truth: head_speed {head_speed(truth):.4g}  "

@@ -138,6 +138,23 @@ def test_the_one_step_benchmark_measures_hands_and_nods_of_truth_one_step_and_fr
     assert refused.returncode == 2 and "invalid choice: 'aud2pose'" in refused.stderr
 
 
+def test_the_epoch_benchmark_scores_each_epoch_and_the_epochs_each_rule_would_keep():
+    output = run("bench_epochs.py", "flowvae", "--quick", "--seed", "1", "--first", "2")
+    epochs = re.findall(r"^epoch (\d+) \| validation loss \d\.\d+ \| val: hellinger ", output, re.M)
+    assert epochs == ["2", "3"], output
+    assert all(
+        re.search(r"test: hellinger \S+  fgd \S+  ratio \S+  nods \S+  drift \S+$", row)
+        for row in output.splitlines()
+        if row.startswith("epoch ")
+    )
+    for rule in ("validation loss (training's choice)", "validation FGD", "validation Hellinger"):
+        assert re.search(rf"{re.escape(rule)}: [23] \| test: hellinger ", output), (rule, output)
+    refused = launch("bench_epochs.py", "flowvae", "--quick", "--first", "9")
+    assert (
+        refused.returncode == 2 and "--first must be an epoch of the recipe's 1-3" in refused.stderr
+    )
+
+
 def test_the_video_benchmark_times_each_write():
     output = run("bench_video.py", "--seconds", "1", "--repeats", "2")
     assert re.search(r"1\.0 s of two motions \(25 frames\): \d+\.\d+ s, \d+\.\d+ s", output), output
