@@ -13,6 +13,8 @@ shows progress. Without ``torchrun`` nothing here does anything.
 from __future__ import annotations
 
 import os
+import pickle
+import time
 
 import torch
 import torch.distributed as dist
@@ -54,19 +56,42 @@ def all_sum(sums: dict[str, tuple[float, int]]) -> dict[str, tuple[float, int]]:
         return sums
     keys = sorted(sums)
     values = torch.tensor([v for key in keys for v in sums[key]], dtype=torch.float64)
-    if dist.get_backend() == "nccl":  # NCCL reduces GPU tensors only
-        values = values.to(torch.cuda.current_device())
-    dist.all_reduce(values)
+    values = _share(dist.all_reduce, values)
     return {key: (float(values[2 * i]), int(values[2 * i + 1])) for i, key in enumerate(keys)}
 
 
 def from_first(value):
     """Process 0's ``value`` (any picklable object) in every process: one decision for all."""
-    if world()[1] == 1:
+    rank, size = world()
+    if size == 1:
         return value
-    shared = [value]
-    dist.broadcast_object_list(shared, src=0)
-    return shared[0]
+    data = pickle.dumps(value) if rank == 0 else b""
+    length = _share(dist.broadcast, torch.tensor([len(data)]), src=0)
+    if rank == 0:
+        buffer = torch.frombuffer(bytearray(data), dtype=torch.uint8)
+    else:
+        buffer = torch.empty(int(length), dtype=torch.uint8)
+    return pickle.loads(_share(dist.broadcast, buffer, src=0).numpy().tobytes())
+
+
+def _share(collective, tensor: torch.Tensor, **options) -> torch.Tensor:
+    """``collective(tensor, **options)`` (in place) on the backend's device; the result on the
+    CPU, and under gloo once gloo has let go of the tensor.
+
+    Gloo's worker threads release a collective's tensors a moment after it completes. If the
+    last reference to a tensor made in Python is one of theirs, releasing it needs Python's
+    lock; should that happen while the interpreter shuts down, the process aborts ("terminate
+    called without an active exception"), and ``destroy_process_group`` does not stop those
+    threads. So Python keeps the tensor until gloo has dropped it (a few microseconds)."""
+    if dist.get_backend() == "nccl":  # NCCL works on GPU tensors only
+        tensor = tensor.to(torch.cuda.current_device())
+        collective(tensor, **options)
+        return tensor.cpu()
+    collective(tensor, **options)
+    deadline = time.monotonic() + 10.0
+    while tensor._use_count() > 1 and time.monotonic() < deadline:
+        time.sleep(0.0005)  # lets the worker thread take Python's lock
+    return tensor
 
 
 def finish() -> None:

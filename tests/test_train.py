@@ -772,7 +772,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from gesturelib.distributed import finish, start_from_environment, world
+from gesturelib.distributed import all_sum, finish, from_first, start_from_environment, world
 from gesturelib.flows import ActNorm
 from gesturelib.train import TrainConfig, train
 
@@ -810,10 +810,12 @@ model = Regressor(Config())
 config = TrainConfig(epochs=epochs, batch_size=16, warmup_steps=8, lr_max=0.05, lr_min=0.005)
 history = train(model, data(64, 1), data(32, 2), config, folder, progress=False)
 rank = world()[0]
-torch.save({"weights": model.state_dict(), "train": history.train}, f"{folder}/result{rank}.pt")
-# Leave the process group before exiting, as the command line does: a process that exits with
-# gloo's threads still running can abort ("terminate called without an active exception").
-finish()
+shared = {"first": from_first({"rank": rank, "text": "ü" * 300}), "sum": all_sum({"a": (rank + 0.5, 1)})}
+torch.save(
+    {"weights": model.state_dict(), "train": history.train, "shared": shared},
+    f"{folder}/result{rank}.pt",
+)
+finish()  # leave the process group before exiting, as the command line does
 """
 
 
@@ -834,7 +836,8 @@ def run_two_processes(script, *arguments):
 def test_two_processes_train_as_one_process_on_the_same_global_batch(tmp_path):
     """Each process takes half of every batch, the gradients are averaged, the ActNorm starts
     from the whole first batch: the weights and the losses are one process's, to float rounding,
-    in both processes, also for a run resumed in two; process 0 alone writes the run folder."""
+    in both processes, also for a run resumed in two; process 0 alone writes the run folder;
+    process 0's objects and the sums over processes reach both."""
     script = tmp_path / "train_two.py"
     script.write_text(DISTRIBUTED_SCRIPT)
     run_two_processes(script, tmp_path / "two", 2)
@@ -853,6 +856,8 @@ def test_two_processes_train_as_one_process_on_the_same_global_batch(tmp_path):
         TrainConfig(**settings),
         progress=False,
     )
+    for result in (together, other):  # process 0's object, and the sum of both processes'
+        assert result["shared"] == {"first": {"rank": 0, "text": "ü" * 300}, "sum": {"a": (2.0, 2)}}
     for key, value in alone.state_dict().items():
         torch.testing.assert_close(together["weights"][key], value, rtol=1e-4, atol=1e-5)
         torch.testing.assert_close(other["weights"][key], together["weights"][key])
