@@ -6,8 +6,10 @@ best, and whether the validation conversations would tell: the recipe is trained
 into a scratch run folder one epoch at a time (each call resumes the folder, its random state
 included, so the run is the one ``make results`` trains), and the weights after each epoch from
 ``--first`` on (``last.pt``) are scored with ``bench_quality.py``'s measures, 3 samples per
-conversation of the validation and of the test split. At the end, for a few ways of choosing an
-epoch on validation alone, the epoch chosen and its test measures.
+conversation of the validation and of the test split, and of the first ``--train-conversations``
+training ones (rollouts on speech the model was trained on: a judge with more minutes than the
+validation split's three). At the end, for a few ways of choosing an epoch without the test
+split, the epoch chosen and its test measures.
 
 Usage::
 
@@ -40,6 +42,8 @@ CHOICES = {
     "validation loss (training's choice)": lambda row: row["loss"],
     "validation FGD": lambda row: row["val"]["fgd"],
     "validation Hellinger": lambda row: row["val"]["hellinger"],
+    "training FGD": lambda row: row["train"]["fgd"],
+    "training Hellinger": lambda row: row["train"]["hellinger"],
 }
 
 
@@ -49,6 +53,9 @@ def main() -> None:
     parser.add_argument("--change", nargs="*", default=[], help="model config fields: key=value")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--first", type=int, default=21, help="the first epoch scored")
+    parser.add_argument(
+        "--train-conversations", type=int, default=6, help="training conversations scored"
+    )
     parser.add_argument("--quick", action="store_true", help="quick data and configs")
     args = parser.parse_args()
     changes = parse_changes(args.change)
@@ -58,9 +65,16 @@ def main() -> None:
         parser.error(str(error))
     if not 1 <= args.first <= training.epochs:
         parser.error(f"--first must be an epoch of the recipe's 1-{training.epochs}")
+    if args.train_conversations < 1:
+        parser.error("--train-conversations must be at least 1")
     torch.set_num_threads(1)
     splits = load_dataset(course_data(args.quick))
     features = fgd_features(splits, args.quick)
+    judged = {
+        "val": splits["val"],
+        "test": splits["test"],
+        "train": splits["train"][: args.train_conversations],
+    }
     rows = {}
     with tempfile.TemporaryDirectory() as scratch:
         for epoch in range(args.first, training.epochs + 1):
@@ -78,14 +92,14 @@ def main() -> None:
             trained.model.load_state_dict(torch.load(last, weights_only=False)["model"])
             trained.model.eval()
             row = {"loss": trained.history.val["loss"][-1]}
-            for split in ("val", "test"):
-                row[split] = score(trained, splits[split], features, 3, None)
+            for split, conversations in judged.items():
+                row[split] = score(trained, conversations, features, 3, None)
             rows[epoch] = row
             print(
                 f"epoch {epoch} | validation loss {row['loss']:.5f} | "
                 + " | ".join(
                     f"{split}: " + "  ".join(f"{k} {row[split][k]:.3g}" for k in MEASURES)
-                    for split in ("val", "test")
+                    for split in judged
                 ),
                 flush=True,
             )

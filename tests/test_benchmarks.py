@@ -143,11 +143,11 @@ def test_the_epoch_benchmark_scores_each_epoch_and_the_epochs_each_rule_would_ke
     epochs = re.findall(r"^epoch (\d+) \| validation loss \d\.\d+ \| val: hellinger ", output, re.M)
     assert epochs == ["2", "3"], output
     assert all(
-        re.search(r"test: hellinger \S+  fgd \S+  ratio \S+  nods \S+  drift \S+$", row)
+        re.search(r"test: hellinger \S+  fgd \S+  ratio \S+  nods \S+  drift \S+ \| train: ", row)
         for row in output.splitlines()
         if row.startswith("epoch ")
     )
-    for rule in ("validation loss (training's choice)", "validation FGD", "validation Hellinger"):
+    for rule in ("validation loss (training's choice)", "validation FGD", "training FGD"):
         assert re.search(rf"{re.escape(rule)}: [23] \| test: hellinger ", output), (rule, output)
     refused = launch("bench_epochs.py", "flowvae", "--quick", "--first", "9")
     assert (
