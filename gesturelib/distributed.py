@@ -68,7 +68,8 @@ def from_first(value):
     data = pickle.dumps(value) if rank == 0 else b""
     length = _share(dist.broadcast, torch.tensor([len(data)]), src=0)
     if rank == 0:
-        buffer = torch.frombuffer(bytearray(data), dtype=torch.uint8)
+        # A copy torch owns: freeing a view of Python's bytes would need Python's lock too.
+        buffer = torch.frombuffer(bytearray(data), dtype=torch.uint8).clone()
     else:
         buffer = torch.empty(int(length), dtype=torch.uint8)
     return pickle.loads(_share(dist.broadcast, buffer, src=0).numpy().tobytes())
