@@ -1,10 +1,11 @@
 """One run of a recipe scored after each of its last epochs, on validation and on test.
 
 Training picks the epoch with the best *validation loss* (teacher forced: every frame one step
-ahead of the recorded past). This asks whether that is the epoch whose *generated* motion is
-best, and whether the validation conversations would tell: the recipe is trained from ``--seed``
-into a scratch run folder one epoch at a time (each call resumes the folder, its random state
-included, so the run is the one ``make results`` trains), and the weights after each epoch from
+ahead of the recorded past), unless its recipe judges its last epochs. This asks whether that is
+the epoch whose *generated* motion is best, and whether the validation conversations would tell:
+the recipe is trained from ``--seed`` into a scratch run folder one epoch at a time, unjudged
+(each call resumes the folder, its random state included, so the run is the one ``make results``
+trains: judging changes which epoch is kept, not the training), and the weights after each epoch from
 ``--first`` on (``last.pt``) are scored with ``bench_quality.py``'s measures, 3 samples per
 conversation of the validation and of the test split, and of the first ``--train-conversations``
 training ones (rollouts on speech the model was trained on: a judge with more minutes than the
@@ -39,7 +40,7 @@ REPO = Path(__file__).resolve().parents[1]
 MEASURES = ("hellinger", "fgd", "ratio", "nods", "drift")
 #: Ways of choosing an epoch from its validation measures (lower is better).
 CHOICES = {
-    "validation loss (training's choice)": lambda row: row["loss"],
+    "validation loss": lambda row: row["loss"],
     "validation FGD": lambda row: row["val"]["fgd"],
     "validation Hellinger": lambda row: row["val"]["hellinger"],
     "training FGD": lambda row: row["train"]["fgd"],
@@ -84,7 +85,7 @@ def main() -> None:
                 quick=args.quick,
                 seed=args.seed,
                 model_changes=changes,
-                train_changes={"epochs": epoch},
+                train_changes={"epochs": epoch, "judged_epochs": 0},
                 out=scratch,
                 progress=False,
             )

@@ -52,6 +52,7 @@ _LABELS = {
     "model_config": "model config",
     "train_config": "training config",
     "data": "training data",
+    "judge": "judge",
 }
 
 
@@ -244,8 +245,8 @@ class RunFolder:
                 held.enter_context(exclusive(self.folder / ".lock", remove=True))
             except LockedError as error:
                 raise CheckpointError(
-                    f"another training run (process {error.holder}) is writing {self.folder}; wait for it to "
-                    "end, or choose another folder"
+                    f"another training run ({error.holder}) is writing {self.folder}; wait for it "
+                    "to end, or choose another folder"
                 ) from None
             yield
 
@@ -272,8 +273,8 @@ class RunFolder:
         belongs to this run."""
         ignore = set(may_differ)
         problems = []
-        for key in IDENTITY:
-            stored, wanted = checkpoint[key], self.identity[key]
+        for key in (*IDENTITY, "judge"):  # a judged run's identity also holds its judge's
+            stored, wanted = checkpoint.get(key), self.identity.get(key)
             if key == "train_config":
                 stored = {k: v for k, v in stored.items() if k not in ignore}
                 wanted = {k: v for k, v in wanted.items() if k not in ignore}

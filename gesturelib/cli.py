@@ -87,6 +87,7 @@ def run_train(args) -> Path:
         quick=quick,
         seed=args.seed,
         train_changes={"device": train_device},
+        cache=args.cache,
         out=out,
         overwrite=args.overwrite,
         progress=first,
@@ -307,6 +308,9 @@ def run_info(args) -> str:
     parameters = sum(p.numel() for p in model.parameters())
     size = sum(p.stat().st_size for p in Path(args.run).rglob("*") if p.is_file())
     summary = read_summary(args.run)
+    kept_by = "validation loss"
+    if history.best_epoch in history.judged:  # the pipeline's judge
+        kept_by = "FGD of its motion generated for the validation conversations"
     lines = [
         f"run folder      {args.run}",
         f"model           {checkpoint['model_class']} ({parameters:,} parameters)",
@@ -314,7 +318,7 @@ def run_info(args) -> str:
         f"training config {json.dumps(checkpoint['train_config'])}",
         f"data            {summary.get('data', '(unknown)')} (fingerprint {checkpoint['data']})",
         f"training        {history.epochs} epochs in {sum(history.epoch_seconds):.0f} s, best "
-        f"epoch {history.best_epoch} (validation loss {checkpoint['score']:.4g})",
+        f"epoch {history.best_epoch} ({kept_by} {checkpoint['score']:.4g})",
         f"size on disk    {size / 1e6:.1f} MB",
     ]
     data = summary.get("data")
@@ -586,6 +590,13 @@ def _parser() -> argparse.ArgumentParser:
     again.add_argument("--overwrite", action="store_true", help="replace the run in --out")
     train.add_argument("--device", default="cpu", help="cpu or cuda")
     train.add_argument("--threads", type=_at_least(1), default=1, help="torch threads (default 1)")
+    train.add_argument(
+        "--cache",
+        type=Path,
+        default=Path("checkpoints"),
+        help="where the FGD's motion-feature network that judges a model's last epochs is cached "
+        "(flowvae; default checkpoints/)",
+    )
 
     generate = commands.add_parser("generate", help="the agent's motion for a recording")
     generate.add_argument("run", type=Path, help="a run folder")

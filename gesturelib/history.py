@@ -21,8 +21,11 @@ class History:
         val: the same on the validation data (empty without validation data).
         learning_rate: the rate of each epoch's last step.
         epoch_seconds: wall time of each epoch, validation included.
-        best_epoch: the epoch whose weights were kept (best validation loss).
+        best_epoch: the epoch whose weights were kept: the best validation loss, or the best
+            judged epoch once any epoch has been judged.
         stopped_early: whether early stopping ended the run.
+        judged: the judge's score (lower is better) of each judged epoch, by epoch: the last
+            ``TrainConfig.judged_epochs`` epochs of a run trained with a judge.
     """
 
     train: dict[str, list[float]] = field(default_factory=dict)
@@ -31,6 +34,7 @@ class History:
     epoch_seconds: list[float] = field(default_factory=list)
     best_epoch: int | None = None
     stopped_early: bool = False
+    judged: dict[int, float] = field(default_factory=dict)
 
     @property
     def epochs(self) -> int:
@@ -59,9 +63,10 @@ class History:
 
     @classmethod
     def from_dict(cls, data: dict) -> History:
-        """Inverse of :meth:`to_dict`; the keys must be exactly the fields."""
+        """Inverse of :meth:`to_dict`; the keys must be the fields (``judged`` may be missing:
+        histories written before judging existed)."""
         names = {f.name for f in dataclasses.fields(cls)}
-        if not isinstance(data, dict) or set(data) != names:
+        if not isinstance(data, dict) or not names - {"judged"} <= set(data) <= names:
             got = sorted(data) if isinstance(data, dict) else type(data).__name__
             raise ValueError(f"a History needs exactly the keys {sorted(names)}, got {got}")
         return cls(
@@ -71,10 +76,12 @@ class History:
             epoch_seconds=list(data["epoch_seconds"]),
             best_epoch=data["best_epoch"],
             stopped_early=bool(data["stopped_early"]),
+            judged={int(epoch): float(score) for epoch, score in data.get("judged", {}).items()},
         )
 
     def plot(self, keys: list[str] | None = None):
-        """One panel per logged scalar (training and validation) and one for the learning rate.
+        """One panel per logged scalar (training and validation), one for the judge's scores of
+        a judged run, and one for the learning rate.
 
         Args:
             keys: which scalars to show; all by default.
@@ -85,10 +92,9 @@ class History:
         from matplotlib.ticker import MaxNLocator
 
         keys = list(self.train) if keys is None else keys
+        panels = len(keys) + bool(self.judged) + 1
         epochs = np.arange(1, self.epochs + 1)
-        fig, axes = plt.subplots(
-            1, len(keys) + 1, figsize=(3.6 * (len(keys) + 1), 3), squeeze=False
-        )
+        fig, axes = plt.subplots(1, panels, figsize=(3.6 * panels, 3), squeeze=False)
         for ax in axes[0]:
             ax.set_xlabel("epoch")
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -96,12 +102,16 @@ class History:
                 ax.axvline(
                     self.best_epoch, color="k", linestyle=":", linewidth=1, label="best (kept)"
                 )
-        for ax, key in zip(axes[0, :-1], keys, strict=True):
+        for ax, key in zip(axes[0, : len(keys)], keys, strict=True):
             ax.plot(epochs, self.train[key], label="training")
             if key in self.val:
                 ax.plot(epochs, self.val[key], label="validation")
             ax.set_title(key)
             ax.legend()
+        if self.judged:
+            ax = axes[0, len(keys)]
+            ax.plot(list(self.judged), list(self.judged.values()), "o-", color="C2")
+            ax.set_title("judged (lower is better)")
         axes[0, -1].plot(epochs, self.learning_rate, color="grey")
         axes[0, -1].set_title("learning rate")
         fig.tight_layout()

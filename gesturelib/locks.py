@@ -20,10 +20,11 @@ POLL_S = 0.5
 
 
 class LockedError(OSError):
-    """Another process holds the lock (and the caller chose not to wait); ``holder`` names it."""
+    """Another process holds the lock (and the caller chose not to wait); ``holder`` names it:
+    ``"process 1234"``, or ``"another process"`` if it has not yet written its number."""
 
     def __init__(self, path: Path, holder: str):
-        super().__init__(f"process {holder} holds {path}")
+        super().__init__(f"{holder} holds {path}")
         self.holder = holder
 
 
@@ -63,11 +64,12 @@ def exclusive(path: str | Path, *, wait_for: str | None = None, remove: bool = F
         announced = False
         while not _try_lock(stream):
             stream.seek(0)
-            holder = stream.read().strip() or "unknown"
+            number = stream.read().strip()  # empty for a moment after the holder has locked
+            holder = f"process {number}" if number else "another process"
             if wait_for is None:
                 raise LockedError(path, holder)
             if not announced:
-                print(f"Waiting for process {holder}, which is {wait_for}", flush=True)
+                print(f"Waiting for {holder}, which is {wait_for}", flush=True)
                 announced = True
             time.sleep(POLL_S)
         stream.seek(0)

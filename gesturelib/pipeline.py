@@ -3,7 +3,8 @@ speech turned into motion.
 
 * :func:`train_model`: recipe -> configs (quick or full, with changes) -> training windows and
   normaliser -> the model built under its seed -> trained into a run folder, or loaded from the
-  cache of trained runs (a model with a stage one trains that first). The command line's
+  cache of trained runs (a model with a stage one trains that first; a recipe with judged epochs
+  is judged by the FGD of the motion it generates for the validation conversations). The command line's
   ``train``, the chapters, ``make results`` and the benchmarks call it.
 * :func:`speech_to_motion`: a recording (and a partner's) -> who is talking -> speech features ->
   frame-by-frame sampling -> limb rotations and keypoints. ``generate``, ``demo``, the explorer
@@ -24,6 +25,8 @@ import numpy as np
 from torch import nn
 
 from gesturelib.data import ConversationLike, Normaliser, make_datasets
+from gesturelib.evaluation.fgd import feature_network
+from gesturelib.evaluation.judge import GeneratedMotionFGD
 from gesturelib.features import mix_voices, speech_features, who_is_talking
 from gesturelib.history import History
 from gesturelib.recipes import RECIPES
@@ -52,7 +55,7 @@ def train_model(
     seed: int = 0,
     model_changes: Mapping | None = None,
     train_changes: Mapping | None = None,
-    cache: str | Path | None = DEFAULT_CACHE,
+    cache: str | Path = DEFAULT_CACHE,
     out: str | Path | None = None,
     overwrite: bool = False,
     progress: bool = True,
@@ -71,7 +74,8 @@ def train_model(
             it.
         train_changes: fields of the training config to change (``epochs``, ``device``, ...).
         cache: the folder of cached runs (:func:`gesturelib.train.load_or_train`): a finished
-            run is loaded, an interrupted one resumed. Used when ``out`` is None.
+            run is loaded, an interrupted one resumed, when ``out`` is None. Also where the
+            FGD's feature network is cached, for a recipe with judged epochs.
         out: a run folder to train into (the command line's ``train``); a run of this model,
             configs and data found there is resumed. A stage-one model goes into
             ``out/<stage one>``.
@@ -98,6 +102,16 @@ def train_model(
         quick, model_changes or {}, **{"seed": seed, **(train_changes or {})}
     )
     datasets, normaliser = make_datasets(splits, windows)
+    judge = None
+    if training.judged_epochs:
+        features = feature_network(
+            [c.positions for c in splits["train"]],
+            [c.positions for c in splits["val"]],
+            cache,
+            quick=quick,
+            progress=progress,
+        )
+        judge = GeneratedMotionFGD(splits["val"], normaliser, features)
 
     def build(config):
         return recipe.make(config, normaliser, inner)
@@ -113,6 +127,7 @@ def train_model(
             normaliser,
             # A plain model(config) keeps the cache key of a chapter that trains it by hand.
             build=None if recipe.build is None else build,
+            judge=judge,
             progress=progress,
         )
     else:
@@ -126,6 +141,7 @@ def train_model(
             normaliser=normaliser,
             overwrite=overwrite,
             progress=progress,
+            judge=judge,
         )
         model.eval()
     return Trained(model, history, normaliser)

@@ -13,6 +13,10 @@ The model protocol: every model trained here is an ``nn.Module`` that
 :func:`train` runs Adam with the Noam schedule of MoGlow and the Flow-VAE paper, clips the
 gradient norm, evaluates on the validation data after every epoch in ``eval()`` mode without
 gradients (no dropout), keeps the best weights and stops early when validation stops improving.
+A run may also be *judged*: a ``judge`` scores the model after each of its last epochs (the
+pipeline's judges the motion it generates for the validation conversations), and the best-judged
+of those epochs is kept rather than the best validation loss, a teacher-forced score that can
+keep falling while generation gets worse.
 Every random draw (shuffle order, dropout, noise) comes from generators seeded by
 ``TrainConfig.seed``, so the same initial weights, seed and data give the same model. A NaN or
 infinite loss or gradient raises :class:`NonFiniteLossError` *before* the optimiser step.
@@ -33,7 +37,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -85,7 +89,10 @@ class TrainConfig:
         lr_max: peak learning rate (1.5e-3 in MoGlow and the Flow-VAE paper).
         lr_min: floor of the inverse-square-root decay (1.5e-4 in both papers).
         grad_clip_norm: largest total gradient norm; None = no clipping.
-        patience: stop after this many epochs without a better validation loss; None = never.
+        patience: stop after this many epochs without a better validation loss (or judged
+            score); None = never.
+        judged_epochs: how many of the last epochs ``train``'s judge scores; the best-judged of
+            them is kept instead of the best validation loss. 0: none (and no judge).
         drop_last: drop the last, smaller training batch of each epoch (for batch norm).
         seed: seeds the shuffle order and every random draw of the model during training.
         num_workers: ``DataLoader`` worker processes (0 = load in the main process).
@@ -99,6 +106,7 @@ class TrainConfig:
     lr_min: float = 1.5e-4
     grad_clip_norm: float | None = 5.0
     patience: int | None = 10
+    judged_epochs: int = 0
     drop_last: bool = False
     seed: int = 0
     num_workers: int = 0
@@ -108,7 +116,7 @@ class TrainConfig:
         check_fields(
             self,
             positive=("epochs", "batch_size", "warmup_steps"),
-            counts=("seed", "num_workers"),
+            counts=("seed", "num_workers", "judged_epochs"),
             flags=("drop_last",),
         )
         if self.patience is not None:
@@ -169,6 +177,7 @@ def train(
     progress: bool = True,
     overwrite: bool = False,
     data_fingerprint: str | None = None,
+    judge: Judge | None = None,
 ) -> History:
     """Train ``model`` on ``train_data``; end with its best weights (on validation) loaded.
 
@@ -185,6 +194,8 @@ def train(
         overwrite: start afresh, deleting the checkpoints in ``checkpoint_dir``.
         data_fingerprint: identifies the data in the run folder; by default
             :func:`~gesturelib.checkpoints.dataset_fingerprint` of both datasets.
+        judge: scores the model after each of the last ``config.judged_epochs`` epochs
+            (:class:`Judge`); needed exactly when ``judged_epochs`` > 0.
     Returns:
         The :class:`History`. The model is on ``config.device``, in the mode it came in.
     Raises:
@@ -192,6 +203,7 @@ def train(
         CheckpointError: if ``checkpoint_dir`` holds a corrupt file or another run's.
     """
     _check_model(model)
+    _check_judge(judge, config)
     for name, data in (("train_data", train_data), ("val_data", val_data)):
         if data is not None and not (hasattr(data, "__getitem__") and hasattr(data, "__len__")):
             raise TypeError(f"{name} must be a map-style dataset (len and indexing)")
@@ -199,18 +211,36 @@ def train(
             raise ValueError(f"{name} has {len(data)} items: too few for one batch")
     target = device(config.device)
     model.to(target)
+    inputs = (model, train_data, val_data, config)
     if checkpoint_dir is None:
-        return _fit(model, train_data, val_data, config, None, normaliser, progress, target)
+        return _fit(*inputs, None, normaliser, judge, progress, target)
     fingerprint = data_fingerprint or dataset_fingerprint(train_data, val_data)
-    folder = RunFolder(checkpoint_dir, _identity(model, config, fingerprint))
+    folder = RunFolder(checkpoint_dir, _identity(model, config, fingerprint, judge))
     if distributed.world()[0] > 0:  # under torchrun: process 0 claims the folder and writes it
-        return _fit(model, train_data, val_data, config, folder, normaliser, progress, target)
+        return _fit(*inputs, folder, normaliser, judge, progress, target)
     with folder.writing():  # one training run at a time in a folder
         folder.claim(RESUMABLE_FIELDS, overwrite)
-        return _fit(model, train_data, val_data, config, folder, normaliser, progress, target)
+        return _fit(*inputs, folder, normaliser, judge, progress, target)
 
 
-def _fit(model, train_data, val_data, config, folder, normaliser, progress, target) -> History:
+class Judge(Protocol):
+    """Scores a model after one of the last epochs of a judged run; lower is better.
+
+    ``judge(model) -> float`` is called in eval mode without gradients, with the caller's random
+    state kept (its draws do not change the training that follows); a NaN counts as the worst
+    score. ``identity`` (a dict of plain values) says what determines its scores: it joins the
+    run folder's identity and the cache key, so that another judge never resumes or loads the run;
+    the cache key also covers the code of the judge's module.
+    """
+
+    identity: dict
+
+    def __call__(self, model: nn.Module) -> float: ...
+
+
+def _fit(
+    model, train_data, val_data, config, folder, normaliser, judge, progress, target
+) -> History:
     """The loop of :func:`train`, its inputs checked and its folder (or None) claimed."""
     was_training = model.training
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr_max)
@@ -270,9 +300,14 @@ def _fit(model, train_data, val_data, config, folder, normaliser, progress, targ
                     if val and not math.isfinite(val["loss"]):
                         where = f"the validation of epoch {epoch}"
                         raise NonFiniteLossError(_message("validation loss", val, where))
+                    judged = None
+                    if epoch > config.epochs - config.judged_epochs:
+                        bar.set_postfix(epoch=epoch, judging="...")
+                        judged = _judged(judge, model, target) if rank == 0 else None
+                        judged = distributed.from_first(judged)
                     seconds = time.perf_counter() - started
                     sums = distributed.all_sum(sums)  # every process's share of the epoch
-                    run.end_epoch(epoch, _means(sums), val, rate, seconds, config.patience)
+                    run.end_epoch(epoch, _means(sums), val, rate, seconds, config.patience, judged)
         except BaseException as error:
             if folder is not None and not isinstance(error, NonFiniteLossError):
                 error.add_note(
@@ -316,11 +351,22 @@ class _Run:
         if self.best_weights is None and self.history.best_epoch is not None:
             self.best_weights = _cpu_copy(model)  # the best were the last ones
 
-    def end_epoch(self, epoch: int, train_means, val_means, rate, seconds, patience) -> None:
-        """Record the epoch, keep the weights if best, decide on early stopping, save."""
+    def end_epoch(
+        self, epoch: int, train_means, val_means, rate, seconds, patience, judged=None
+    ) -> None:
+        """Record the epoch, keep the weights if best, decide on early stopping, save.
+        ``judged``: the judge's score of a judged epoch; from the first on, only judged epochs
+        compete for best."""
         self.history.append(train_means, val_means, rate, seconds)
         self.epoch = epoch
         score = (val_means or train_means)["loss"]
+        if judged is not None:
+            if not self.history.judged:
+                self.best_score = math.inf
+            self.history.judged[epoch] = judged
+            score = judged
+        elif self.history.judged:  # an extended run's epochs before its new judged ones
+            score = math.inf
         if score < self.best_score:
             self.best_score, self.history.best_epoch = score, epoch
             self.best_weights = _cpu_copy(self.model)
@@ -363,6 +409,18 @@ class _Run:
                 "normaliser": None if self.normaliser is None else self.normaliser.to_dict(),
             },
         )
+
+
+def _judged(judge: Judge, model: nn.Module, target: torch.device) -> float:
+    """The judge's score of the model as it stands, with the training's random state kept; a
+    non-finite score (generation that blew up) is the worst, ``inf``."""
+    model.eval()
+    with (
+        torch.no_grad(),
+        torch.random.fork_rng(devices=[target.index or 0] if target.type == "cuda" else []),
+    ):
+        score = float(judge(model))
+    return score if math.isfinite(score) else math.inf
 
 
 def _update(model, compute, optimizer, batch, rate: float, grad_clip_norm, where: str) -> dict:
@@ -493,13 +551,31 @@ def _check_model(model) -> None:
         )
 
 
-def _identity(model: nn.Module, config: TrainConfig, data: str) -> dict:
-    return {
+def _check_judge(judge, config: TrainConfig) -> None:
+    if (judge is None) != (config.judged_epochs == 0):
+        raise ValueError(
+            f"TrainConfig.judged_epochs={config.judged_epochs} needs a judge, and a judge needs "
+            "judged_epochs > 0: pass both, or neither"
+        )
+    if judge is not None and not (
+        callable(judge) and isinstance(getattr(judge, "identity", None), dict)
+    ):
+        raise TypeError(
+            f"a judge must be callable, judge(model) -> float, with an identity dict; got "
+            f"{type(judge).__name__}"
+        )
+
+
+def _identity(model: nn.Module, config: TrainConfig, data: str, judge: Judge | None) -> dict:
+    identity = {
         "model_class": type(model).__name__,
         "model_config": config_to_dict(model.config),
         "train_config": config_to_dict(config),
         "data": data,
     }
+    if judge is not None:  # (absent, not None, in an unjudged run: older run folders still match)
+        identity["judge"] = judge.identity
+    return identity
 
 
 def build_seeded(build: Callable[[Any], nn.Module], config, seed: int) -> nn.Module:
@@ -521,6 +597,7 @@ def load_or_train(
     *,
     build: Callable[[Any], nn.Module] | None = None,
     data_fingerprint: str | None = None,
+    judge: Judge | None = None,
     progress: bool = True,
 ) -> tuple[nn.Module, History]:
     """The model trained on this data with these configs: loaded if cached, else trained.
@@ -542,6 +619,7 @@ def load_or_train(
             ``lambda config: Aud2Repr2Pose.from_autoencoder(denoiser, config)``. The hash then
             also covers the built model's weights, so that a retrained inner model never brings
             back a run trained around the old one.
+        judge: as for :func:`train`; its ``identity`` joins the hash.
         data_fingerprint: identifies the data; by default
             :func:`~gesturelib.checkpoints.dataset_fingerprint` of both datasets.
         progress: show the progress bar while training, or a line naming the file loaded.
@@ -549,20 +627,25 @@ def load_or_train(
         ``(model, history)``: the model with its best weights, on ``train_config.device``, in
         eval mode, and how its training went.
     """
+    _check_judge(judge, train_config)
     model = build_seeded(build or model_class, model_config, train_config.seed)
     if not isinstance(model, model_class):
         raise TypeError(f"build must return a {model_class.__name__}, got {type(model).__name__}")
     fingerprint = data_fingerprint or dataset_fingerprint(train_data, val_data)
     if build is not None:
         fingerprint = run_key({"data": fingerprint, "initial_state": state_fingerprint(model)})
-    identity = _identity(model, train_config, fingerprint)
+    identity = _identity(model, train_config, fingerprint, judge)
     key_config = {k: v for k, v in identity["train_config"].items() if k not in EXECUTION_FIELDS}
     key = run_key(
         {
             **identity,
             "train_config": key_config,
             "version": VERSION,
-            "code": code_fingerprint(*_TRAINING_CODE, model_class.__module__),
+            "code": code_fingerprint(
+                *_TRAINING_CODE,
+                model_class.__module__,
+                *([type(judge).__module__] if judge else []),
+            ),
         }
     )
     folder = Path(cache_dir) / f"{model_class.__name__}-{key}"
@@ -591,5 +674,6 @@ def load_or_train(
             normaliser=normaliser,
             progress=progress,
             data_fingerprint=fingerprint,
+            judge=judge,
         )
         return model.eval(), history

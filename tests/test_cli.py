@@ -271,10 +271,16 @@ def test_train_into_a_folder_it_cannot_make_says_so_in_one_line(tiny_data, tmp_p
 @pytest.mark.parametrize("model", ["flowvae", "flowvae_elbo"])
 def test_the_flowvaes_train_generate_and_describe_themselves(model, tiny_data, tmp_path, capsys):
     run = tmp_path / model
-    assert main(["train", model, "--out", str(run), "--quick", "--data", str(tiny_data)]) == 0
+    options = ["--quick", "--data", str(tiny_data), "--cache", str(tmp_path / "cache")]
+    assert main(["train", model, "--out", str(run), *options]) == 0
     assert main(["info", str(run)]) == 0
     expected = {"flowvae": "FlowVAE (", "flowvae_elbo": "VariationalFlowVAE ("}[model]
-    assert expected in capsys.readouterr().out
+    described = capsys.readouterr().out
+    assert expected in described
+    # the Flow-VAE keeps the best-judged of its last epochs; the FGD's network is in --cache
+    judged = model == "flowvae"
+    assert ("FGD of its motion generated for the validation conversations" in described) == judged
+    assert any((tmp_path / "cache").glob("MotionFeatureNetwork-*/best.pt")) == judged
     samples = write_wav(tmp_path / "speech.wav", seconds=1.5)
     motions = []
     for out in ("a", "b"):

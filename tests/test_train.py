@@ -251,6 +251,115 @@ def test_training_without_validation_keeps_the_best_training_epoch():
     assert history.val == {} and history.best_epoch == int(np.argmin(history.train["loss"])) + 1
 
 
+class ScriptedJudge:
+    """Scores the epochs it judges with ``scores`` in turn, drawing random numbers as a judge that
+    samples would, and records the model's mode, the gradient mode and the weights it saw."""
+
+    def __init__(self, scores, name="scripted", interrupt_at=None):
+        self.scores, self.identity = list(scores), {"judge": name}
+        self.seen, self.interrupt_at = [], interrupt_at
+
+    def __call__(self, model):
+        if len(self.seen) == self.interrupt_at:
+            self.interrupt_at = None
+            raise KeyboardInterrupt("power cut while judging")
+        torch.randn(100)  # must not change the training that follows
+        self.seen.append((model.training, torch.is_grad_enabled(), weights(model)))
+        return self.scores[len(self.seen) - 1]
+
+
+def test_a_judged_run_keeps_the_best_judged_of_its_last_epochs(reference):
+    judge = ScriptedJudge([5.0, 1.0, 3.0])
+    model = make_model(dropout=0.3)
+    history = train(model, TRAIN, VAL, config(judged_epochs=3), judge=judge, progress=False)
+    # judging changes which epoch is kept, not the training: the losses are the reference's
+    assert (history.train, history.val) == (reference[1].train, reference[1].val)
+    assert history.judged == {2: 5.0, 3: 1.0, 4: 3.0} and history.best_epoch == 3
+    assert [mode[:2] for mode in judge.seen] == [(False, False)] * 3  # eval, no gradients
+    assert_same_weights(weights(model), judge.seen[1][2])
+    assert model.training
+
+
+def test_judged_epochs_compete_among_themselves_and_a_failed_judgement_is_the_worst():
+    # epoch 1, unjudged, has a validation loss far below any judged score; it is not kept
+    history = train(
+        make_model(),
+        TRAIN,
+        VAL,
+        config(judged_epochs=3),
+        judge=ScriptedJudge([50.0, 40.0, 60.0]),
+        progress=False,
+    )
+    assert history.best_epoch == 3
+    # a judge that finds no finite score in any epoch: the best epoch before them is kept
+    history = train(
+        make_model(),
+        TRAIN,
+        VAL,
+        config(judged_epochs=2),
+        judge=ScriptedJudge([math.nan, math.inf]),
+        progress=False,
+    )
+    assert history.judged == {3: math.inf, 4: math.inf}
+    assert history.best_epoch == 1 + int(np.argmin(history.val["loss"][:2]))
+
+
+def test_a_judged_run_resumes_with_its_scores_and_refuses_another_judge(tmp_path):
+    scores = [4.0, 2.0, 3.0]
+
+    def judged_run(model, folder, judge):
+        return train(
+            model,
+            TRAIN,
+            VAL,
+            config(judged_epochs=3),
+            tmp_path / folder,
+            judge=judge,
+            progress=False,
+        )
+
+    clean = make_model(dropout=0.3)
+    history = judged_run(clean, "clean", ScriptedJudge(scores))
+    with pytest.raises(KeyboardInterrupt):  # while judging epoch 3: last.pt holds epoch 2
+        judged_run(make_model(dropout=0.3), "cut", ScriptedJudge(scores, interrupt_at=1))
+    with pytest.raises(CheckpointMismatchError, match="judge"):
+        judged_run(make_model(dropout=0.3), "cut", ScriptedJudge(scores, name="another"))
+    resumed = make_model(seed=4, dropout=0.3)
+    again = judged_run(resumed, "cut", ScriptedJudge(scores[1:]))
+    assert again.judged == history.judged and again.best_epoch == history.best_epoch == 3
+    assert_same_weights(weights(resumed), weights(clean))
+    best = read_checkpoint(tmp_path / "cut" / "best.pt")
+    assert best["score"] == 2.0 and History.from_dict(best["history"]).judged == history.judged
+
+
+def test_a_judge_and_judged_epochs_come_together():
+    with pytest.raises(ValueError, match="judged_epochs=2 needs a judge"):
+        train(make_model(), TRAIN, VAL, config(judged_epochs=2), progress=False)
+    with pytest.raises(ValueError, match="pass both, or neither"):
+        train(make_model(), TRAIN, VAL, config(), judge=ScriptedJudge([1.0]), progress=False)
+    with pytest.raises(TypeError, match="with an identity dict; got function"):
+        train(make_model(), TRAIN, VAL, config(judged_epochs=1), judge=lambda m: 1.0)
+    with pytest.raises(ValueError, match="judged_epochs"):
+        TrainConfig(judged_epochs=-1)
+
+
+def test_load_or_train_keys_a_judged_run_by_its_judge(tmp_path):
+    Counting.calls = 0
+    for name in ("one", "one", "two"):
+        load_or_train(
+            Counting,
+            ToyConfig(),
+            TRAIN,
+            VAL,
+            config(judged_epochs=2),
+            tmp_path,
+            judge=ScriptedJudge([2.0, 1.0], name=name),
+            progress=False,
+        )
+    assert Counting.calls == 2 * 4 * (4 + 2)  # the second run of judge "one" was loaded
+    assert len(list(tmp_path.iterdir())) == 2
+
+
 def test_same_seed_same_result_and_caller_random_state_untouched(reference):
     state = torch.get_rng_state()
     model = make_model(dropout=0.3)
