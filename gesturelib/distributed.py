@@ -12,6 +12,7 @@ shows progress. Without ``torchrun`` nothing here does anything.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import time
@@ -23,10 +24,28 @@ from torch.utils.data import Sampler
 
 
 def world() -> tuple[int, int]:
-    """``(rank, size)``: this process's number and how many train together; ``(0, 1)`` alone."""
-    if dist.is_available() and dist.is_initialized():
+    """``(rank, size)``: this process's number and how many train together; ``(0, 1)`` alone
+    (also inside :func:`alone`)."""
+    if dist.is_available() and dist.is_initialized() and not _alone:
         return dist.get_rank(), dist.get_world_size()
     return 0, 1
+
+
+_alone = False
+
+
+@contextlib.contextmanager
+def alone():
+    """Within the block this process works as if it were alone (``world() == (0, 1)``): what it
+    trains there, it trains by itself, waiting for no other process. For what every process needs
+    alike and the cache of trained runs holds (the judge's feature network): the first to take
+    the cache's lock trains it, the others wait for the lock and load it."""
+    global _alone
+    before, _alone = _alone, True
+    try:
+        yield
+    finally:
+        _alone = before
 
 
 def start_from_environment(device: str) -> str:

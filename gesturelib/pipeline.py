@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 from torch import nn
 
+from gesturelib import distributed
 from gesturelib.data import ConversationLike, Normaliser, make_datasets
 from gesturelib.evaluation.fgd import feature_network
 from gesturelib.evaluation.judge import GeneratedMotionFGD
@@ -104,13 +105,14 @@ def train_model(
     datasets, normaliser = make_datasets(splits, windows)
     judge = None
     if training.judged_epochs:
-        features = feature_network(
-            [c.positions for c in splits["train"]],
-            [c.positions for c in splits["val"]],
-            cache,
-            quick=quick,
-            progress=progress,
-        )
+        with distributed.alone():  # under torchrun: one process trains it, the others load it
+            features = feature_network(
+                [c.positions for c in splits["train"]],
+                [c.positions for c in splits["val"]],
+                cache,
+                quick=quick,
+                progress=progress,
+            )
         judge = GeneratedMotionFGD(splits["val"], normaliser, features)
 
     def build(config):

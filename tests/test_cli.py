@@ -349,19 +349,25 @@ def test_demo_draws_a_new_conversation_unless_given_a_seed(tmp_path, capsys):
 
 def test_torchrun_trains_in_two_processes_into_a_run_folder_that_generates(tiny_data, tmp_path):
     """``torchrun --nproc_per_node=2 -m gesturelib train``: one run folder, written once (by
-    process 0), that the other commands take like any other."""
+    process 0, which also judges the Flow-VAE's last epochs), that the other commands take like
+    any other."""
     import subprocess
     import sys
 
-    run = tmp_path / "moglow-two"
+    from gesturelib.checkpoints import read_checkpoint
+
+    run = tmp_path / "flowvae-two"
     command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2"]
-    command += ["-m", "gesturelib", "train", "moglow", "--quick", "--data", str(tiny_data)]
+    command += ["-m", "gesturelib", "train", "flowvae", "--quick", "--data", str(tiny_data)]
+    command += ["--cache", str(tmp_path / "cache")]
     done = subprocess.run(
         [*command, "--out", str(run)], capture_output=True, text=True, timeout=300
     )
     assert done.returncode == 0, done.stderr[-3000:]
-    assert done.stdout.count("Trained moglow") == 1  # process 0 alone reports
+    assert done.stdout.count("Trained flowvae") == 1  # process 0 alone reports
     assert {p.name for p in run.iterdir()} == {"best.pt", "last.pt", "run.json"}
+    history = read_checkpoint(run / "best.pt")["history"]
+    assert set(history["judged"]) == {2, 3} and history["best_epoch"] in history["judged"]
     stem = next((tiny_data / "test").glob("*.wav")).with_suffix("")
     out = tmp_path / "generated"
     command = ["generate", str(run), "--conversation", str(stem), "--out", str(out), "--no-video"]

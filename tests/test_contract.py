@@ -31,7 +31,7 @@ def held_out(tiny_data):
 def runs(splits, tmp_path_factory, one_thread):
     """Each registered model trained for one quick epoch, twice from seed 1 (after different
     draws of the caller's): name -> (trained, trained again, run folder of the first)."""
-    made = {}
+    made, cache = {}, tmp_path_factory.mktemp("cache")  # the judge's feature network
     for name in RECIPES:
         folders = [tmp_path_factory.mktemp(name) / run for run in ("a", "b")]
         trained = []
@@ -44,6 +44,7 @@ def runs(splits, tmp_path_factory, one_thread):
                     quick=True,
                     seed=1,
                     train_changes={"epochs": 1},
+                    cache=cache,
                     out=folder,
                     progress=False,
                 )
@@ -142,6 +143,7 @@ def test_a_gpu_trains_every_model_and_generates_what_the_cpu_does(
         quick=True,
         seed=1,
         train_changes={"epochs": 1, "device": "cuda"},
+        cache=tmp_path / "cache",
         out=folder,
         progress=False,
     )
