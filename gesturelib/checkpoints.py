@@ -245,8 +245,8 @@ class RunFolder:
                 held.enter_context(exclusive(self.folder / ".lock", remove=True))
             except LockedError as error:
                 raise CheckpointError(
-                    f"another training run ({error.holder}) is writing {self.folder}; wait for it "
-                    "to end, or choose another folder"
+                    f"{error.holder} is writing {self.folder} (another training run); wait for "
+                    "it to end, or choose another folder"
                 ) from None
             yield
 

@@ -32,6 +32,9 @@ from pathlib import Path
 from gesturelib.outputs import OutputError, OutputFolder
 from gesturelib.runtime import OneLineParser
 
+#: What the judges of :mod:`gesturelib.evaluation.judge` score, for ``info``.
+JUDGES = {"GeneratedMotionFGD": "FGD of its motion generated for the validation conversations"}
+
 
 class CommandError(Exception):
     """A problem the user can fix; reported as one line, without a traceback."""
@@ -309,8 +312,9 @@ def run_info(args) -> str:
     size = sum(p.stat().st_size for p in Path(args.run).rglob("*") if p.is_file())
     summary = read_summary(args.run)
     kept_by = "validation loss"
-    if history.best_epoch in history.judged:  # the pipeline's judge
-        kept_by = "FGD of its motion generated for the validation conversations"
+    if history.best_epoch in history.judged:
+        judge = checkpoint["judge"]["judge"]
+        kept_by = JUDGES.get(judge, f"the score of its judge, {judge},")
     lines = [
         f"run folder      {args.run}",
         f"model           {checkpoint['model_class']} ({parameters:,} parameters)",

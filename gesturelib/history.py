@@ -20,12 +20,13 @@ class History:
         train: per logged scalar (``"loss"``, ``"kl"``, ...), its mean over each epoch's batches.
         val: the same on the validation data (empty without validation data).
         learning_rate: the rate of each epoch's last step.
-        epoch_seconds: wall time of each epoch, validation included.
+        epoch_seconds: wall time of each epoch, validation and judging included.
         best_epoch: the epoch whose weights were kept: the best validation loss, or the best
             judged epoch once any epoch has been judged.
         stopped_early: whether early stopping ended the run.
         judged: the judge's score (lower is better) of each judged epoch, by epoch: the last
-            ``TrainConfig.judged_epochs`` epochs of a run trained with a judge.
+            ``TrainConfig.judged_epochs`` epochs of a run trained with a judge (none if it
+            stopped early before them).
     """
 
     train: dict[str, list[float]] = field(default_factory=dict)
@@ -68,7 +69,9 @@ class History:
         names = {f.name for f in dataclasses.fields(cls)}
         if not isinstance(data, dict) or not names - {"judged"} <= set(data) <= names:
             got = sorted(data) if isinstance(data, dict) else type(data).__name__
-            raise ValueError(f"a History needs exactly the keys {sorted(names)}, got {got}")
+            raise ValueError(
+                f"a History needs the keys {sorted(names)} ('judged' may be missing), got {got}"
+            )
         return cls(
             train={key: list(values) for key, values in data["train"].items()},
             val={key: list(values) for key, values in data["val"].items()},

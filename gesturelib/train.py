@@ -22,7 +22,7 @@ Every random draw (shuffle order, dropout, noise) comes from generators seeded b
 infinite loss or gradient raises :class:`NonFiniteLossError` *before* the optimiser step.
 
 With a ``checkpoint_dir`` the run is written to a run folder (:mod:`gesturelib.checkpoints`):
-``last.pt`` after every epoch, ``best.pt`` whenever validation improves. Calling :func:`train`
+``last.pt`` after every epoch, ``best.pt`` whenever the epoch kept changes. Calling :func:`train`
 again with the same folder continues from ``last.pt`` and ends as an uninterrupted run would; a
 folder of another model, config or data is refused unless ``overwrite=True``.
 :func:`load_or_train` builds on this for notebooks: a finished run is loaded from a cache folder
@@ -92,7 +92,8 @@ class TrainConfig:
         patience: stop after this many epochs without a better validation loss (or judged
             score); None = never.
         judged_epochs: how many of the last epochs ``train``'s judge scores; the best-judged of
-            them is kept instead of the best validation loss. 0: none (and no judge).
+            them is kept instead of the best validation loss (a run that stops early before
+            them judges none). 0: none (and no judge).
         drop_last: drop the last, smaller training batch of each epoch (for batch norm).
         seed: seeds the shuffle order and every random draw of the model during training.
         num_workers: ``DataLoader`` worker processes (0 = load in the main process).
@@ -179,7 +180,8 @@ def train(
     data_fingerprint: str | None = None,
     judge: Judge | None = None,
 ) -> History:
-    """Train ``model`` on ``train_data``; end with its best weights (on validation) loaded.
+    """Train ``model`` on ``train_data``; end with its best weights (on validation, or the
+    best-judged) loaded.
 
     Args:
         model: follows the model protocol (module docstring).
@@ -226,7 +228,7 @@ def train(
 class Judge(Protocol):
     """Scores a model after one of the last epochs of a judged run; lower is better.
 
-    ``judge(model) -> float`` is called in eval mode without gradients, with the caller's random
+    ``judge(model) -> float`` is called in eval mode without gradients, with torch's random
     state kept (its draws do not change the training that follows); a NaN counts as the worst
     score. ``identity`` (a dict of plain values) says what determines its scores: it joins the
     run folder's identity and the cache key, so that another judge never resumes or loads the run;
@@ -246,7 +248,7 @@ def _fit(
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr_max)
     rank, size = distributed.world()
     # A random stream of our own, seeded: training neither depends on nor disturbs the caller's.
-    with torch.random.fork_rng(devices=[target.index or 0] if target.type == "cuda" else []):
+    with _own_random_state(target):
         torch.manual_seed(config.seed)
         if rank == 0:  # writes the initial state when starting, so the others can read it
             run = _Run(model, optimizer, folder, normaliser, writes=True)
@@ -267,6 +269,13 @@ def _fit(
                 int(np.random.SeedSequence([config.seed, rank, run.step]).generate_state(1)[0])
             )
             compute = DistributedDataParallel(distributed.LossOf(model))
+        first_judged = config.epochs - config.judged_epochs + 1
+        if run.history.judged and min(run.history.judged) < first_judged:
+            raise ValueError(
+                f"the run in {folder.folder} has judged epochs {sorted(run.history.judged)}; with "
+                f"epochs={config.epochs} it would judge epochs from {first_judged} on: a judged "
+                "run cannot be extended once judging has begun; train a new one"
+            )
         epochs_before = run.epoch
         total = len(_batches(train_data, config, 1)) * config.epochs
         bar = tqdm(
@@ -301,7 +310,7 @@ def _fit(
                         where = f"the validation of epoch {epoch}"
                         raise NonFiniteLossError(_message("validation loss", val, where))
                     judged = None
-                    if epoch > config.epochs - config.judged_epochs:
+                    if epoch >= first_judged:
                         bar.set_postfix(epoch=epoch, judging="...")
                         judged = _judged(judge, model, target) if rank == 0 else None
                         judged = distributed.from_first(judged)
@@ -355,18 +364,16 @@ class _Run:
         self, epoch: int, train_means, val_means, rate, seconds, patience, judged=None
     ) -> None:
         """Record the epoch, keep the weights if best, decide on early stopping, save.
-        ``judged``: the judge's score of a judged epoch; from the first on, only judged epochs
-        compete for best."""
+        ``judged``: the judge's score of a judged epoch. From the first finite one on, only
+        judged epochs compete; until then the best validation (or training) loss is kept."""
         self.history.append(train_means, val_means, rate, seconds)
         self.epoch = epoch
         score = (val_means or train_means)["loss"]
         if judged is not None:
-            if not self.history.judged:
-                self.best_score = math.inf
             self.history.judged[epoch] = judged
+            if self.history.best_epoch not in self.history.judged and math.isfinite(judged):
+                self.best_score = math.inf  # the loss's scale is not the judge's
             score = judged
-        elif self.history.judged:  # an extended run's epochs before its new judged ones
-            score = math.inf
         if score < self.best_score:
             self.best_score, self.history.best_epoch = score, epoch
             self.best_weights = _cpu_copy(self.model)
@@ -415,12 +422,15 @@ def _judged(judge: Judge, model: nn.Module, target: torch.device) -> float:
     """The judge's score of the model as it stands, with the training's random state kept; a
     non-finite score (generation that blew up) is the worst, ``inf``."""
     model.eval()
-    with (
-        torch.no_grad(),
-        torch.random.fork_rng(devices=[target.index or 0] if target.type == "cuda" else []),
-    ):
+    with torch.no_grad(), _own_random_state(target):
         score = float(judge(model))
     return score if math.isfinite(score) else math.inf
+
+
+def _own_random_state(target: torch.device):
+    """A block whose draws from torch's generators (the CPU's, and ``target``'s GPU's) leave
+    them as they were."""
+    return torch.random.fork_rng(devices=[target.index or 0] if target.type == "cuda" else [])
 
 
 def _update(model, compute, optimizer, batch, rate: float, grad_clip_norm, where: str) -> dict:
@@ -552,11 +562,13 @@ def _check_model(model) -> None:
 
 
 def _check_judge(judge, config: TrainConfig) -> None:
-    if (judge is None) != (config.judged_epochs == 0):
+    if judge is None and config.judged_epochs:
         raise ValueError(
-            f"TrainConfig.judged_epochs={config.judged_epochs} needs a judge, and a judge needs "
-            "judged_epochs > 0: pass both, or neither"
+            f"TrainConfig.judged_epochs={config.judged_epochs} needs a judge: pass judge=, or "
+            "set judged_epochs=0"
         )
+    if judge is not None and not config.judged_epochs:
+        raise ValueError("a judge needs TrainConfig.judged_epochs > 0 epochs to judge")
     if judge is not None and not (
         callable(judge) and isinstance(getattr(judge, "identity", None), dict)
     ):
@@ -567,13 +579,16 @@ def _check_judge(judge, config: TrainConfig) -> None:
 
 
 def _identity(model: nn.Module, config: TrainConfig, data: str, judge: Judge | None) -> dict:
+    train_config = config_to_dict(config)
+    if judge is None:  # as in the runs saved before judging existed, which then still match
+        del train_config["judged_epochs"]
     identity = {
         "model_class": type(model).__name__,
         "model_config": config_to_dict(model.config),
-        "train_config": config_to_dict(config),
+        "train_config": train_config,
         "data": data,
     }
-    if judge is not None:  # (absent, not None, in an unjudged run: older run folders still match)
+    if judge is not None:
         identity["judge"] = judge.identity
     return identity
 
@@ -644,7 +659,7 @@ def load_or_train(
             "code": code_fingerprint(
                 *_TRAINING_CODE,
                 model_class.__module__,
-                *([type(judge).__module__] if judge else []),
+                *([] if judge is None else [type(judge).__module__]),
             ),
         }
     )

@@ -280,7 +280,7 @@ def test_a_judged_run_keeps_the_best_judged_of_its_last_epochs(reference):
     assert model.training
 
 
-def test_judged_epochs_compete_among_themselves_and_a_failed_judgement_is_the_worst():
+def test_judged_epochs_compete_among_themselves_and_a_failed_judgement_is_the_worst(tmp_path):
     # epoch 1, unjudged, has a validation loss far below any judged score; it is not kept
     history = train(
         make_model(),
@@ -297,11 +297,45 @@ def test_judged_epochs_compete_among_themselves_and_a_failed_judgement_is_the_wo
         TRAIN,
         VAL,
         config(judged_epochs=2),
+        tmp_path,
         judge=ScriptedJudge([math.nan, math.inf]),
         progress=False,
     )
     assert history.judged == {3: math.inf, 4: math.inf}
     assert history.best_epoch == 1 + int(np.argmin(history.val["loss"][:2]))
+    best = read_checkpoint(tmp_path / "best.pt")
+    assert best["epoch"] == history.best_epoch
+    assert best["score"] == history.val["loss"][history.best_epoch - 1]  # the loss that chose it
+    # the first finite judgement takes over from the loss
+    judge = ScriptedJudge([math.inf, 7.0, 9.0])
+    history = train(make_model(), TRAIN, VAL, config(judged_epochs=3), judge=judge, progress=False)
+    assert history.best_epoch == 3
+
+
+def test_a_judged_run_cannot_be_extended_and_an_unjudged_one_saves_no_judged_epochs(tmp_path):
+    train(
+        make_model(),
+        TRAIN,
+        VAL,
+        config(judged_epochs=2),
+        tmp_path / "judged",
+        judge=ScriptedJudge([2.0, 1.0]),
+        progress=False,
+    )
+    assert read_checkpoint(tmp_path / "judged" / "best.pt")["train_config"]["judged_epochs"] == 2
+    with pytest.raises(ValueError, match=r"judged epochs \[3, 4\]; with epochs=6 it would judge"):
+        train(
+            make_model(),
+            TRAIN,
+            VAL,
+            config(epochs=6, judged_epochs=2),
+            tmp_path / "judged",
+            judge=ScriptedJudge([2.0, 1.0]),
+            progress=False,
+        )
+    # as in the run folders saved before judging existed, which still resume
+    train(make_model(), TRAIN, VAL, config(), tmp_path / "plain", progress=False)
+    assert "judged_epochs" not in read_checkpoint(tmp_path / "plain" / "last.pt")["train_config"]
 
 
 def test_a_judged_run_resumes_with_its_scores_and_refuses_another_judge(tmp_path):
@@ -333,9 +367,9 @@ def test_a_judged_run_resumes_with_its_scores_and_refuses_another_judge(tmp_path
 
 
 def test_a_judge_and_judged_epochs_come_together():
-    with pytest.raises(ValueError, match="judged_epochs=2 needs a judge"):
+    with pytest.raises(ValueError, match="judged_epochs=2 needs a judge: pass judge="):
         train(make_model(), TRAIN, VAL, config(judged_epochs=2), progress=False)
-    with pytest.raises(ValueError, match="pass both, or neither"):
+    with pytest.raises(ValueError, match="a judge needs TrainConfig.judged_epochs > 0"):
         train(make_model(), TRAIN, VAL, config(), judge=ScriptedJudge([1.0]), progress=False)
     with pytest.raises(TypeError, match="with an identity dict; got function"):
         train(make_model(), TRAIN, VAL, config(judged_epochs=1), judge=lambda m: 1.0)
@@ -395,6 +429,18 @@ def test_model_without_config_dataclass_is_rejected():
     model.config = {"hidden": 8}
     with pytest.raises(TypeError, match="config dataclass"):
         train(model, TRAIN, VAL, config(), progress=False)
+
+
+def test_a_history_without_judged_epochs_loads_and_a_judged_one_plots_them(reference):
+    saved = reference[1].to_dict()
+    del saved["judged"]  # a history saved before judging existed
+    assert History.from_dict(saved) == reference[1]
+    judged = History.from_dict({**saved, "judged": {3: 2.0, 4: 1.0}, "best_epoch": 4})
+    figure = judged.plot(["loss"])
+    titles = [ax.get_title() for ax in figure.axes]
+    assert titles == ["loss", "judged (lower is better)", "learning rate"]
+    assert list(figure.axes[1].lines[-1].get_xdata()) == [3, 4]
+    plt.close(figure)
 
 
 def test_history_round_trip_and_plot(reference):
@@ -881,7 +927,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from gesturelib.distributed import all_sum, finish, from_first, start_from_environment, world
+from gesturelib.distributed import all_sum, alone, finish, from_first, start_from_environment, world
 from gesturelib.flows import ActNorm
 from gesturelib.train import TrainConfig, train
 
@@ -920,8 +966,14 @@ config = TrainConfig(epochs=epochs, batch_size=16, warmup_steps=8, lr_max=0.05, 
 history = train(model, data(64, 1), data(32, 2), config, folder, progress=False)
 rank = world()[0]
 shared = {"first": from_first({"rank": rank, "text": "ü" * 300}), "sum": all_sum({"a": (rank + 0.5, 1)})}
+with alone():
+    worlds = [world()]
+    with alone():
+        worlds.append(world())
+    worlds.append(world())
+worlds.append(world())
 torch.save(
-    {"weights": model.state_dict(), "train": history.train, "shared": shared},
+    {"weights": model.state_dict(), "train": history.train, "shared": shared, "worlds": worlds},
     f"{folder}/result{rank}.pt",
 )
 finish()  # leave the process group before exiting, as the command line does
@@ -965,8 +1017,10 @@ def test_two_processes_train_as_one_process_on_the_same_global_batch(tmp_path):
         TrainConfig(**settings),
         progress=False,
     )
-    for result in (together, other):  # process 0's object, and the sum of both processes'
+    for rank, result in enumerate((together, other)):
+        # process 0's object, and the sum of both processes'
         assert result["shared"] == {"first": {"rank": 0, "text": "ü" * 300}, "sum": {"a": (2.0, 2)}}
+        assert result["worlds"] == [(0, 1)] * 3 + [(rank, 2)]  # alone, nested, and after
     for key, value in alone.state_dict().items():
         torch.testing.assert_close(together["weights"][key], value, rtol=1e-4, atol=1e-5)
         torch.testing.assert_close(other["weights"][key], together["weights"][key])
