@@ -480,7 +480,7 @@ def test_a_second_training_run_in_one_folder_is_told_another_is_writing(
         held.flush()
         fcntl.flock(held.fileno(), fcntl.LOCK_EX)
         assert main([*command, "--overwrite"]) == 2
-        assert "another training run (process 4242)" in one_line_error(capsys, "train")
+        assert "process 4242 is writing" in one_line_error(capsys, "train")
     # a lock file left by a run that died holds no lock: the next run takes the folder
     assert main([*command, "--overwrite"]) == 0
     assert not (run / ".lock").exists()
