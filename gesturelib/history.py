@@ -22,7 +22,7 @@ class History:
         learning_rate: the rate of each epoch's last step.
         epoch_seconds: wall time of each epoch, validation and judging included.
         best_epoch: the epoch whose weights were kept: the best validation loss, or the best
-            judged epoch once any epoch has been judged.
+            judged epoch once an epoch has been judged with a finite score.
         stopped_early: whether early stopping ended the run.
         judged: the judge's score (lower is better) of each judged epoch, by epoch: the last
             ``TrainConfig.judged_epochs`` epochs of a run trained with a judge (none if it

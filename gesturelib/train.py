@@ -369,11 +369,16 @@ class _Run:
         self.history.append(train_means, val_means, rate, seconds)
         self.epoch = epoch
         score = (val_means or train_means)["loss"]
+        # whether a finite judgement chose the best epoch so far
+        judging = math.isfinite(self.history.judged.get(self.history.best_epoch, math.inf))
         if judged is not None:
             self.history.judged[epoch] = judged
-            if self.history.best_epoch not in self.history.judged and math.isfinite(judged):
-                self.best_score = math.inf  # the loss's scale is not the judge's
-            score = judged
+            if math.isfinite(judged):
+                if not judging:
+                    self.best_score = math.inf  # the loss's scale is not the judge's
+                score = judged
+            elif judging:
+                score = math.inf  # an epoch the judge cannot score never wins
         if score < self.best_score:
             self.best_score, self.history.best_epoch = score, epoch
             self.best_weights = _cpu_copy(self.model)

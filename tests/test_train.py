@@ -291,7 +291,7 @@ def test_judged_epochs_compete_among_themselves_and_a_failed_judgement_is_the_wo
         progress=False,
     )
     assert history.best_epoch == 3
-    # a judge that finds no finite score in any epoch: the best epoch before them is kept
+    # a judge that finds no finite score in any epoch: the loss decides, as in an unjudged run
     history = train(
         make_model(),
         TRAIN,
@@ -302,14 +302,20 @@ def test_judged_epochs_compete_among_themselves_and_a_failed_judgement_is_the_wo
         progress=False,
     )
     assert history.judged == {3: math.inf, 4: math.inf}
-    assert history.best_epoch == 1 + int(np.argmin(history.val["loss"][:2]))
+    assert history.best_epoch == 1 + int(np.argmin(history.val["loss"]))
     best = read_checkpoint(tmp_path / "best.pt")
     assert best["epoch"] == history.best_epoch
     assert best["score"] == history.val["loss"][history.best_epoch - 1]  # the loss that chose it
-    # the first finite judgement takes over from the loss
-    judge = ScriptedJudge([math.inf, 7.0, 9.0])
+    # the first finite judgement takes over from the loss; a later failed one never wins
+    judge = ScriptedJudge([math.inf, 7.0, math.nan])
     history = train(make_model(), TRAIN, VAL, config(judged_epochs=3), judge=judge, progress=False)
     assert history.best_epoch == 3
+    # judged from the first epoch, which the judge cannot score: the loss decides until it can
+    judge = ScriptedJudge([math.nan, 9.0, 7.0, 8.0])
+    history = train(
+        make_model(), TRAIN, VAL, config(judged_epochs=4, patience=1), judge=judge, progress=False
+    )
+    assert history.best_epoch == 3 and history.epochs == 4
 
 
 def test_a_judged_run_cannot_be_extended_and_an_unjudged_one_saves_no_judged_epochs(tmp_path):
