@@ -15,8 +15,10 @@ that generates motion (``moglow``, ``flowvae``, ``flowvae_elbo``), one after the
   pose; the mismatched motion comes from the validation conversations). Mean ± sd over the
   samples;
 * for a model with style control: the style realised in its samples when each feature is held at
-  the 15th, 50th and 85th percentile of the training values (the others at their median), and the
-  rank correlation between requested and realised levels over conversations and samples.
+  the 15th, 50th and 85th percentile of the training values (the others at their median), the
+  share of the change asked that is realised, and the rank correlation between asked and
+  realised levels over conversations and samples
+  (:func:`gesturelib.evaluation.style_control.style_response`).
 
 Usage (a missing run folder named after a model, e.g. ``runs/flowvae``, is trained first with
 ``python -m gesturelib train``)::
@@ -32,22 +34,20 @@ import statistics
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from data_synth import load_dataset
 from gesturelib import cli
 from gesturelib.data import make_datasets
 from gesturelib.evaluation import generate_for, headline_measures, reference_motions
+from gesturelib.evaluation.style_control import style_response
 from gesturelib.features import speech_features
 from gesturelib.history import History
-from gesturelib.metrics import rank_correlation
 from gesturelib.pose_surface import project
 from gesturelib.pretrained import load_run
 from gesturelib.recipes import RECIPES
 from gesturelib.sampling import generate
 from gesturelib.skeleton import forward_kinematics
-from gesturelib.style import STYLE_FEATURES, style_features
 
 MEASURES = ("hellinger", "ratio", "lead")
 
@@ -85,36 +85,14 @@ def summarise(scores: list[dict]) -> str:
     return "   ".join(parts)
 
 
-def style_control(model, normaliser, conversations, samples: int, temperature: float):
-    """Requested vs realised level of each style feature: prints a table, returns the rank
-    correlations."""
-    correlations = {}
-    for index, name in enumerate(STYLE_FEATURES):
-        requested, realised = [], []
-        for percentile in (15, 50, 85):
-            style = normaliser.style_at_percentiles({name: percentile})
-            motions = generate_for(
-                conversations,
-                model,
-                normaliser,
-                samples=samples,
-                temperature=temperature,
-                seed=0,
-                style={name: percentile},
-            )
-            for motion in motions:
-                for sample in motion:
-                    requested.append(style[index])
-                    realised.append(style_features(sample)[:, index].mean())
-        correlations[name] = rank_correlation(requested, realised)
-        levels = np.array(realised).reshape(3, -1).mean(axis=1)
-        targets = sorted(set(requested))
+def style_control(model, normaliser, conversations, samples: int) -> None:
+    """Asked vs realised level of each style feature (:func:`style_response`): prints a table."""
+    for name, response in style_response(model, normaliser, conversations, samples).items():
         print(
-            f"  {name:15} requested {' / '.join(f'{t:7.2f}' for t in targets)}   realised "
-            f"{' / '.join(f'{v:7.2f}' for v in levels)}   rank correlation "
-            f"{correlations[name]:.2f}"
+            f"  {name:15} asked {' / '.join(f'{v:7.2f}' for v in response.asked)}   realised "
+            f"{' / '.join(f'{v:7.2f}' for v in response.realised)}   share "
+            f"{response.share:.2f}   rank correlation {response.rank_correlation:.2f}"
         )
-    return correlations
 
 
 def measure(run: Path, temperatures: list[float], samples: int) -> None:
@@ -152,8 +130,8 @@ def measure(run: Path, temperatures: list[float], samples: int) -> None:
         label = f"{summary['model']}, T = {temperature:g}"
         print(f"{label:22} {summarise(scores)}   ({samples} samples)")
     if getattr(model.config, "style", False):
-        print(f"\nstyle control (T = {temperatures[0]:g}):")
-        style_control(model, normaliser, test, samples, temperatures[0])
+        print("\nstyle control (at the model's own temperature):")
+        style_control(model, normaliser, test, samples)
 
 
 def main() -> None:

@@ -10,7 +10,9 @@ precision, the 99th percentile of the head's downward pitch speed, the correlati
 wrists' speeds while the agent speaks (:func:`hand_correlation`), the drift
 (:func:`gesturelib.evaluation.headline.drift`: the limb-angle error to the truth in the last
 10 s of the held-out conversations over the first 10 s, averaged over the samples first), the
-parameters and the training minutes.
+parameters and the training minutes; for a model trained with style inputs (``--change
+style=True``), also the share of a style change asked that its samples realise, per feature
+(:func:`gesturelib.evaluation.style_control.style_response`, 2 samples).
 
 Usage (``make benchmark`` runs it without arguments: the Flow-VAE's recipe, seeds 0-2)::
 
@@ -18,6 +20,7 @@ Usage (``make benchmark`` runs it without arguments: the Flow-VAE's recipe, seed
     .venv/bin/python benchmarks/bench_quality.py flowvae --change latent_noise=0 --train epochs=20
     .venv/bin/python benchmarks/bench_quality.py moglow --temperature 0.8   # same models, colder
     .venv/bin/python benchmarks/bench_quality.py diffusion --sampling steps=50 method=ddpm
+    .venv/bin/python benchmarks/bench_quality.py moglow --change style=True
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from gesturelib.conventions import FPS
 from gesturelib.evaluation.fgd import feature_network
 from gesturelib.evaluation.headline import drift, hand_sharing, speaking_wrist_speeds
 from gesturelib.evaluation.rules import head_pitch
+from gesturelib.evaluation.style_control import style_response
 from gesturelib.evaluation.table import score_draw
 from gesturelib.models import Sampling
 from gesturelib.pipeline import speech_to_motion, train_model
@@ -126,6 +130,9 @@ def score(trained, test, features, samples: int, temperature: float | None, save
     row = {key: float(np.mean([d[key] for d in draws])) for key in per_draw}
     row["drift"] = drift([[r[k] for r in per_conversation] for k in range(samples)], test)
     row["minutes"] = sum(trained.history.epoch_seconds) / 60
+    if getattr(trained.model.config, "style", False):
+        responses = style_response(trained.model, trained.normaliser, test, samples=2)
+        row |= {f"{name}_share": response.share for name, response in responses.items()}
     return row
 
 
@@ -187,12 +194,12 @@ def main() -> None:
         parameters = sum(p.numel() for p in trained.model.parameters())
         print(
             f"{label} | seed {seed} | {parameters:,} parameters | "
-            + "  ".join(f"{k} {rows[-1][k]:.4g}" for k in COLUMNS)
+            + "  ".join(f"{k} {v:.4g}" for k, v in rows[-1].items())
             + f" | {time.perf_counter() - started:.0f} s",
             flush=True,
         )
     if len(rows) > 1:
-        values = {k: np.array([r[k] for r in rows]) for k in COLUMNS}
+        values = {k: np.array([r[k] for r in rows]) for k in rows[0]}
         print(
             f"{label} | mean ± sd over {len(rows)} seeds | "
             + "  ".join(f"{k} {v.mean():.4g} ± {v.std(ddof=1):.2g}" for k, v in values.items()),

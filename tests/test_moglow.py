@@ -222,6 +222,19 @@ def test_style_control_holds_the_asked_style_and_refuses_impossible_percentiles(
         normaliser.style_at_percentiles({"hand_height": 101})
 
 
+def test_the_style_reaches_every_coupling_as_it_is_beside_the_encoded_control(data):
+    from gesturelib.models.control import ControlEncoder
+
+    _, _, batch = data
+    config = dataclasses.replace(SMALL, style=True)
+    encoder = ControlEncoder(config, hidden=8)
+    control = encoder(batch)
+    assert control.shape[-1] == config.encoded_size == config.control_size + 4
+    torch.testing.assert_close(control[..., -4:], batch["style"])
+    plain = ControlEncoder(SMALL, hidden=8)
+    assert plain(batch).shape[-1] == SMALL.encoded_size == SMALL.control_size
+
+
 def test_generation_with_a_progress_bar_draws_the_same_motion(
     short_windows, trained_looking, monkeypatch
 ):

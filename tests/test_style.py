@@ -109,3 +109,78 @@ def test_each_measure_follows_the_generators_style(parameter, feature):
         style = style_features(conversation.positions, FPS)[speaking]
         measured.append(style[:, STYLE_FEATURES.index(feature)].mean())
     assert measured[1] > measured[0]
+
+
+# gesturelib.evaluation.style_control: the share of a style change realised, on known answers.
+
+
+class _Percentiles:
+    """A normaliser's style percentiles, each feature's p-th percentile equal to ``p``."""
+
+    style_percentiles = np.repeat(np.arange(101.0)[:, None], len(STYLE_FEATURES), axis=1)
+
+    def style_at_percentiles(self, percentiles):
+        return np.array([percentiles.get(name, 50.0) for name in STYLE_FEATURES])
+
+
+def _standing_with_right_hand_at(height: float, frames: int = 50) -> np.ndarray:
+    motion = still(frames)
+    motion[:, RIGHT, 1] = height
+    return motion
+
+
+@pytest.mark.parametrize("obeys, share", [(1.0, 1.0), (0.25, 0.25), (0.0, 0.0)])
+def test_the_share_realised_of_a_hand_height_asked(monkeypatch, obeys, share):
+    from gesturelib.evaluation import headline, style_control
+
+    def generate_for(conversations, model, normaliser, samples, seed, style):
+        ((name, level),) = style.items()
+        height = 50.0 + obeys * (level - 50.0) if name == "hand_height" else 40.0
+        return [np.stack([_standing_with_right_hand_at(height)] * samples) for _ in conversations]
+
+    monkeypatch.setattr(headline, "generate_for", generate_for)
+    model = type("Styled", (), {"config": type("Config", (), {"style": True})()})()
+    responses = style_control.style_response(model, _Percentiles(), [None, None], samples=2)
+    height = responses["hand_height"]
+    np.testing.assert_allclose(height.asked, [15, 50, 85])
+    np.testing.assert_allclose(height.realised, 50.0 + obeys * (np.array([15, 50, 85]) - 50.0))
+    assert height.share == pytest.approx(share)
+    if obeys:
+        assert height.rank_correlation == pytest.approx(1.0)
+    assert responses["gesture_radius"].share == pytest.approx(0.0)
+
+
+def test_a_model_without_style_inputs_is_refused():
+    from gesturelib.evaluation.style_control import style_response
+
+    model = type("Plain", (), {"config": type("Config", (), {"style": False})()})()
+    with pytest.raises(ValueError, match="no style inputs"):
+        style_response(model, _Percentiles(), [])
+
+
+def test_the_span_of_recorded_clips_over_the_change_asked():
+    from gesturelib.evaluation.style_control import conversation_span
+    from gesturelib.evaluation.transfer import clip_style
+
+    heights = np.linspace(40.0, 60.0, 21)  # clip averages whose 15th-85th percentiles span 14
+    clips = np.array([clip_style(_standing_with_right_hand_at(h)) for h in heights])
+    span = conversation_span(_Percentiles(), clips)
+    assert span["hand_height"] == pytest.approx(14.0 / 70.0)  # asked: 15 -> 85
+    assert span["hand_speed"] == pytest.approx(0.0)
+
+
+def test_the_style_response_figure_has_a_panel_per_feature():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from gesturelib.evaluation.figures import plot_style_response
+    from gesturelib.evaluation.style_control import StyleResponse
+
+    levels = np.array([15.0, 50.0, 85.0])
+    responses = {
+        name: StyleResponse(levels, 50.0 + 0.5 * (levels - 50.0), 0.5, 1.0)
+        for name in STYLE_FEATURES
+    }
+    figure = plot_style_response(responses, np.full((6, 4), 50.0) + np.arange(6)[:, None])
+    assert [ax.get_title() for ax in figure.axes] == [f"{n}: share 0.50" for n in STYLE_FEATURES]
+    assert len(figure.axes[0].lines) == 2  # obeyed in full, and realised

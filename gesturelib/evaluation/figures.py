@@ -10,6 +10,9 @@ name to its keypoints ``(T, 9, 3)``, one per held-out conversation (one draw of 
 * :func:`plot_hands`: each wrist's speed over time, per system: whether one hand rests while
   the other gestures;
 * :func:`plot_overlays`: each system's skeleton drawn once a second, overlaid.
+
+and, for one model with style inputs, :func:`plot_style_response`: the style realised against
+the style asked.
 """
 
 from __future__ import annotations
@@ -144,6 +147,25 @@ def plot_head_drops(drops: dict) -> plt.Figure:
     ax.set(xlabel="time after the partner's phrase end (ms)", ylabel="downward speed (°/s)")
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
+    return fig
+
+
+def plot_style_response(responses: dict, recorded: np.ndarray) -> plt.Figure:
+    """One panel per style feature: the mean style realised at each level asked, against the
+    level (``responses``: :func:`~gesturelib.evaluation.style_control.style_response`), with the
+    line of full obedience and a band where the middle 70 % of recorded clips lie (``recorded``:
+    ``(N, 4)`` their styles, :func:`~gesturelib.evaluation.transfer.clip_style`)."""
+    fig, axes = plt.subplots(1, len(responses), figsize=(3.3 * len(responses), 3.2))
+    low, high = np.percentile(recorded, [15, 85], axis=0)
+    for k, (ax, (name, response)) in enumerate(zip(axes, responses.items(), strict=True)):
+        ax.axhspan(low[k], high[k], color="0.85", label="recorded clips, 15th-85th percentile")
+        ax.plot(response.asked, response.asked, "k--", lw=1, label="realised = asked")
+        ax.plot(response.asked, response.realised, "o-", label="realised (mean)")
+        ax.set(title=f"{name}: share {response.share:.2f}", xlabel="asked")
+    axes[0].set_ylabel("realised (clip average)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncols=3)
+    fig.tight_layout(rect=(0, 0, 1, 0.86))
     return fig
 
 

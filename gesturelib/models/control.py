@@ -13,7 +13,9 @@ The control ``c_t`` of frame ``t`` is what the next-frame flow is conditioned on
 That is about 1.2k numbers a frame. Read by the recurrent network of each of the ``K`` couplings,
 it would dominate the cost, so one small network (as Ye et al.'s global encoder) turns it into
 ``control_size`` numbers that all couplings read; ``control_size=0`` passes the raw control on,
-as the reference MoGlow code does.
+as the reference MoGlow code does. The style's four numbers pass beside the encoder, as they
+are: mixed into its first layer with a thousand others they were mostly ignored, and the
+samples followed little of a style asked (chapter 05 measures it).
 """
 
 from __future__ import annotations
@@ -58,14 +60,16 @@ class ControlConfig(SpeechContext):
 
     @property
     def raw_control_size(self) -> int:
-        """Numbers in the control of one frame before encoding."""
+        """Numbers in the control of one frame that the encoder reads (all but the style)."""
         window = self.speech_window * (N_MELS + NUM_ACTIVITIES)
-        return self.past_poses * POSE_DIM + window + (len(STYLE_FEATURES) if self.style else 0)
+        return self.past_poses * POSE_DIM + window
 
     @property
     def encoded_size(self) -> int:
-        """Numbers in the control the couplings read: ``control_size``, or the raw size."""
-        return self.control_size or self.raw_control_size
+        """Numbers in the control the couplings read: ``control_size`` (or the raw size), and
+        the style."""
+        style = len(STYLE_FEATURES) if self.style else 0
+        return (self.control_size or self.raw_control_size) + style
 
 
 def control_shapes(config) -> dict[str, tuple[int, ...]]:
@@ -104,13 +108,15 @@ class ControlEncoder(nn.Module):
             self.encoder = nn.Identity()
 
     def forward(self, batch: dict[str, torch.Tensor], drop_past: bool = False) -> torch.Tensor:
-        """Encode ``past_pose (B, L, tau, 54)``, ``speech (B, L, W, 27)``, ``activity (B, L, W, 4)``
-        (and ``style (B, L, 4)``) into ``(B, L, encoded_size)``; ``drop_past`` applies data
-        dropout (training only)."""
+        """Encode ``past_pose (B, L, tau, 54)``, ``speech (B, L, W, 27)`` and ``activity (B, L,
+        W, 4)`` into ``(B, L, encoded_size)``, with ``style (B, L, 4)`` (if the config has it)
+        appended as it is; ``drop_past`` applies data dropout (training only)."""
         config = self.config
-        past, *rest = batch_parts(batch, control_shapes(config), type(self).__name__)
+        past, speech, activity, *style = batch_parts(
+            batch, control_shapes(config), type(self).__name__
+        )
         if drop_past and config.dropout > 0:
             kept = torch.rand(past.shape[:3], device=past.device) >= config.dropout
             past = past * kept[..., None]  # a dropped pose becomes the mean pose, zero
-        flat = [part.flatten(2) for part in (past, *rest)]
-        return self.encoder(torch.cat(flat, dim=-1))
+        flat = [part.flatten(2) for part in (past, speech, activity)]
+        return torch.cat([self.encoder(torch.cat(flat, dim=-1)), *style], dim=-1)
