@@ -85,7 +85,7 @@ def summarise(scores: list[dict]) -> str:
     return "   ".join(parts)
 
 
-def style_control(model, normaliser, conversations, samples: int) -> None:
+def print_style_response(model, normaliser, conversations, samples: int) -> None:
     """Asked vs realised level of each style feature (:func:`style_response`): prints a table."""
     for name, response in style_response(model, normaliser, conversations, samples).items():
         print(
@@ -131,7 +131,7 @@ def measure(run: Path, temperatures: list[float], samples: int) -> None:
         print(f"{label:22} {summarise(scores)}   ({samples} samples)")
     if getattr(model.config, "style", False):
         print("\nstyle control (at the model's own temperature):")
-        style_control(model, normaliser, test, samples)
+        print_style_response(model, normaliser, test, samples)
 
 
 def main() -> None:

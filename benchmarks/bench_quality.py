@@ -131,7 +131,9 @@ def score(trained, test, features, samples: int, temperature: float | None, save
     row["drift"] = drift([[r[k] for r in per_conversation] for k in range(samples)], test)
     row["minutes"] = sum(trained.history.epoch_seconds) / 60
     if getattr(trained.model.config, "style", False):
-        responses = style_response(trained.model, trained.normaliser, test, samples=2)
+        responses = style_response(
+            trained.model, trained.normaliser, test, samples=2, temperature=temperature
+        )
         row |= {f"{name}_share": response.share for name, response in responses.items()}
     return row
 

@@ -222,10 +222,10 @@ def test_style_control_holds_the_asked_style_and_refuses_impossible_percentiles(
         normaliser.style_at_percentiles({"hand_height": 101})
 
 
-def test_the_style_reaches_every_coupling_as_it_is_beside_the_encoded_control(data):
+def test_the_style_reaches_the_couplings_as_it_is_beside_the_encoded_control(data, trained_looking):
     from gesturelib.models.control import ControlEncoder
 
-    _, _, batch = data
+    _, normaliser, batch = data
     config = dataclasses.replace(SMALL, style=True)
     encoder = ControlEncoder(config, hidden=8)
     control = encoder(batch)
@@ -233,6 +233,27 @@ def test_the_style_reaches_every_coupling_as_it_is_beside_the_encoded_control(da
     torch.testing.assert_close(control[..., -4:], batch["style"])
     plain = ControlEncoder(SMALL, hidden=8)
     assert plain(batch).shape[-1] == SMALL.encoded_size == SMALL.control_size
+    model = trained_looking(config, normaliser, batch)  # the flow's density moves with the style
+    change = batch["pose"] - batch["past_pose"][:, :, -1]
+    with torch.no_grad():
+        log_probs = [
+            model.flow.log_prob(change, model.control({**batch, "style": batch["style"] + shift}))[
+                0
+            ]
+            for shift in (0, 1)
+        ]
+    assert not torch.allclose(*log_probs)
+
+
+def test_a_style_model_saved_before_the_style_passed_beside_the_encoder_is_refused(tmp_path):
+    from gesturelib.checkpoints import CheckpointMismatchError, load_state
+
+    model = MoGlow(dataclasses.replace(SMALL, style=True))
+    state = model.state_dict()
+    first = "control.encoder.0.weight"  # the old encoder read the style: 4 more inputs
+    state[first] = torch.zeros(state[first].shape[0], state[first].shape[1] + 4)
+    with pytest.raises(CheckpointMismatchError, match="(?s)control.encoder.0.weight.*retrain it"):
+        load_state(model, state, tmp_path / "best.pt")
 
 
 def test_generation_with_a_progress_bar_draws_the_same_motion(

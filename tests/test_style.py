@@ -133,7 +133,7 @@ def _standing_with_right_hand_at(height: float, frames: int = 50) -> np.ndarray:
 def test_the_share_realised_of_a_hand_height_asked(monkeypatch, obeys, share):
     from gesturelib.evaluation import headline, style_control
 
-    def generate_for(conversations, model, normaliser, samples, seed, style):
+    def generate_for(conversations, model, normaliser, samples, seed, temperature, style):
         ((name, level),) = style.items()
         height = 50.0 + obeys * (level - 50.0) if name == "hand_height" else 40.0
         return [np.stack([_standing_with_right_hand_at(height)] * samples) for _ in conversations]
@@ -147,6 +147,8 @@ def test_the_share_realised_of_a_hand_height_asked(monkeypatch, obeys, share):
     assert height.share == pytest.approx(share)
     if obeys:
         assert height.rank_correlation == pytest.approx(1.0)
+    else:  # the same motion at every level: no ranks to correlate
+        assert np.isnan(height.rank_correlation)
     assert responses["gesture_radius"].share == pytest.approx(0.0)
 
 

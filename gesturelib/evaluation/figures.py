@@ -22,6 +22,7 @@ import numpy as np
 
 from gesturelib.conventions import FPS
 from gesturelib.evaluation.headline import WRIST_SPEED_BINS, wrist_speed_histogram, wrist_speeds
+from gesturelib.evaluation.style_control import LEVELS
 from gesturelib.metrics import distance_from_mean_pose, speaking_listening_statistics
 from gesturelib.skeleton import JOINT_INDEX, KEYPOINTS
 
@@ -155,15 +156,15 @@ def plot_style_response(responses: dict, recorded: np.ndarray) -> plt.Figure:
     level (``responses``: :func:`~gesturelib.evaluation.style_control.style_response`), with the
     line of full obedience and a band where the middle 70 % of recorded clips lie (``recorded``:
     ``(N, 4)`` their styles, :func:`~gesturelib.evaluation.transfer.clip_style`)."""
-    fig, axes = plt.subplots(1, len(responses), figsize=(3.3 * len(responses), 3.2))
-    low, high = np.percentile(recorded, [15, 85], axis=0)
-    for k, (ax, (name, response)) in enumerate(zip(axes, responses.items(), strict=True)):
+    fig, axes = plt.subplots(1, len(responses), figsize=(3.3 * len(responses), 3.2), squeeze=False)
+    low, high = np.percentile(recorded, [LEVELS[0], LEVELS[-1]], axis=0)
+    for k, (ax, (name, response)) in enumerate(zip(axes[0], responses.items(), strict=True)):
         ax.axhspan(low[k], high[k], color="0.85", label="recorded clips, 15th-85th percentile")
         ax.plot(response.asked, response.asked, "k--", lw=1, label="realised = asked")
         ax.plot(response.asked, response.realised, "o-", label="realised (mean)")
         ax.set(title=f"{name}: share {response.share:.2f}", xlabel="asked")
-    axes[0].set_ylabel("realised (clip average)")
-    handles, labels = axes[0].get_legend_handles_labels()
+    axes[0, 0].set_ylabel("realised (clip average)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", ncols=3)
     fig.tight_layout(rect=(0, 0, 1, 0.86))
     return fig

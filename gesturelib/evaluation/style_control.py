@@ -49,7 +49,12 @@ class StyleResponse:
 
 
 def style_response(
-    model, normaliser, conversations: Sequence, samples: int = 2, seed: int = 0
+    model,
+    normaliser,
+    conversations: Sequence,
+    samples: int = 2,
+    seed: int = 0,
+    temperature: float | None = None,
 ) -> dict[str, StyleResponse]:
     """Each style feature held at each of :data:`LEVELS` in turn, for the speech (and who is
     talking) of ``conversations``: ``{feature: StyleResponse}``.
@@ -59,6 +64,7 @@ def style_response(
             normaliser, whose ``style_percentiles`` give the levels.
         conversations: with ``audio``, ``sample_rate`` and ``activity``; their motion is not used.
         samples, seed: draws per conversation and level, and their seed.
+        temperature: of the draws; the model's own if None.
     Raises:
         ValueError: for a model without style inputs.
     """
@@ -74,7 +80,13 @@ def style_response(
         for level in LEVELS:
             value = normaliser.style_at_percentiles({name: level})[index]
             motions = generate_for(
-                conversations, model, normaliser, samples=samples, seed=seed, style={name: level}
+                conversations,
+                model,
+                normaliser,
+                samples=samples,
+                seed=seed,
+                temperature=temperature,
+                style={name: level},
             )
             for draws in motions:
                 for motion in draws:

@@ -6,16 +6,18 @@ The control ``c_t`` of frame ``t`` is what the next-frame flow is conditioned on
   is replaced by the mean pose (zero, in normalised units) with probability ``dropout``,
   independently, so that the model cannot simply continue its past and ignore the speech
   (Alexanderson et al. 2020); validation and generation never drop;
-* the speech window (5 past, the current and 25 future speech frames: 1 s of look-ahead,
-  because gestures lead the speech they go with) and the same window of who is talking;
+* the speech window (``speech_past`` past frames, the current one and 25 future ones: 1 s of
+  look-ahead, because gestures lead the speech they go with) and the same window of who is
+  talking;
 * optionally MoGlow's style inputs (:mod:`gesturelib.style`).
 
-That is about 1.2k numbers a frame. Read by the recurrent network of each of the ``K`` couplings,
-it would dominate the cost, so one small network (as Ye et al.'s global encoder) turns it into
-``control_size`` numbers that all couplings read; ``control_size=0`` passes the raw control on,
-as the reference MoGlow code does. The style's four numbers pass beside the encoder, as they
-are: mixed into its first layer with a thousand others they were mostly ignored, and the
-samples followed little of a style asked (chapter 05 measures it).
+That is about 1.2k numbers a frame with 5 past speech frames (the Flow-VAE), 1.5k with 15
+(MoGlow). Read by the recurrent network of each of the ``K`` couplings, it would dominate the
+cost, so one small network (as Ye et al.'s global encoder) turns it into ``control_size`` numbers
+that all couplings read; ``control_size=0`` passes the raw control on, as the reference MoGlow
+code does. The style's four numbers (standardised) pass beside the encoder: mixed into its first
+layer with the other 1.5k they were mostly ignored, and the samples followed little of a style
+asked (``docs/benchmarks.md``, "Style that obeys").
 """
 
 from __future__ import annotations

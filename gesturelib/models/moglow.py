@@ -7,9 +7,9 @@ over the 54 pose numbers whose couplings hold LSTMs:
 
 * **The control** ``c_t`` of frame ``t`` (:mod:`gesturelib.models.control`): the previous
   ``tau = 5`` poses (with data dropout while training), the speech window with 1 s of
-  look-ahead, the same window of who is talking, and optionally the style, encoded by one small
-  network into ``control_size`` numbers that every coupling reads next to the untouched half of
-  the pose.
+  look-ahead and the same window of who is talking, encoded by one small network into
+  ``control_size`` numbers that every coupling reads next to the untouched half of the pose, and
+  optionally the style, read beside them as it is.
 * **Memory**: each coupling's LSTM runs along the frames, so the flow at frame ``t`` depends on
   everything before it, not only on ``tau`` poses. The likelihood of a sequence is exact:
   ``log p(x_{1:T} | c) = sum_t log p(x_t | x_{<t}, c_t)``.
