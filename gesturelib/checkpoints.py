@@ -183,8 +183,7 @@ def load_state(model: nn.Module, state: dict, path: str | Path) -> None:
             f"{path} does not fit {type(model).__name__}:\n  "
             + "\n  ".join(problems)
             + "\nIt holds another model, or one saved by a version of gesturelib whose layers "
-            "differ (e.g. a MoGlow with style inputs saved before they passed beside the control "
-            "encoder): retrain it with this version."
+            "differ: retrain it with this version."
         )
     model.load_state_dict(state)
 

@@ -131,14 +131,14 @@ def _standing_with_right_hand_at(height: float, frames: int = 50) -> np.ndarray:
 
 @pytest.mark.parametrize("obeys, share", [(1.0, 1.0), (0.25, 0.25), (0.0, 0.0)])
 def test_the_share_realised_of_a_hand_height_asked(monkeypatch, obeys, share):
-    from gesturelib.evaluation import headline, style_control
+    from gesturelib.evaluation import style_control
 
     def generate_for(conversations, model, normaliser, samples, seed, temperature, style):
         ((name, level),) = style.items()
         height = 50.0 + obeys * (level - 50.0) if name == "hand_height" else 40.0
         return [np.stack([_standing_with_right_hand_at(height)] * samples) for _ in conversations]
 
-    monkeypatch.setattr(headline, "generate_for", generate_for)
+    monkeypatch.setattr(style_control, "generate_for", generate_for)
     model = type("Styled", (), {"config": type("Config", (), {"style": True})()})()
     responses = style_control.style_response(model, _Percentiles(), [None, None], samples=2)
     height = responses["hand_height"]

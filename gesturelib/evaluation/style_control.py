@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gesturelib.evaluation.headline import generate_for
 from gesturelib.evaluation.transfer import clip_style
 from gesturelib.metrics import rank_correlation
 from gesturelib.style import STYLE_FEATURES
@@ -68,8 +69,6 @@ def style_response(
     Raises:
         ValueError: for a model without style inputs.
     """
-    from gesturelib.evaluation.headline import generate_for
-
     if not getattr(model.config, "style", False):
         raise ValueError(
             f"this {type(model).__name__} has no style inputs: train it with style=True"
