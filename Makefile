@@ -38,8 +38,9 @@ test: setup
 	GESTURELIB_QUICK=1 MPLBACKEND=Agg $(BIN)/python -m pytest notebooks tests \
 		--nbval-lax --nbval-current-env --nbval-cell-timeout=300 -n auto --dist loadscope
 
-## make check-full: every notebook executed in full mode, its claims asserted (NB=04 for one);
-## the executed copies, with their pictures, go to outputs/check-full/. Not part of CI (minutes).
+## make check-full: every notebook executed in full mode, its claims asserted, then its exercises'
+## solutions (NB=04 for one); the executed copies, with their pictures, go to outputs/check-full/.
+## Not part of CI (minutes to hours).
 NB ?=
 check-full: setup
 	$(BIN)/python tools/check_full.py $(NB)

@@ -70,3 +70,25 @@ def test_no_file_of_the_repository_points_outside_it(pattern):
         and re.search(pattern, (ROOT / path).read_text(encoding="utf-8", errors="replace"))
     ]
     assert not found, f"{found} refer to files outside the repository"
+
+
+def test_every_chapter_with_exercises_has_solutions_that_parse():
+    """Each notebook's exercises have a solutions file whose python blocks (run after the chapter
+    by ``make check-full``) are valid Python."""
+    import ast
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    try:
+        from check_full import chapters, solutions_of
+    finally:
+        sys.path.remove(str(ROOT / "tools"))
+    for notebook in chapters(""):
+        if "## Exercises" not in notebook.read_text():
+            continue
+        blocks = solutions_of(notebook)
+        assert blocks, f"{notebook.name} has exercises but no docs/solutions/ file with code"
+        for heading, code in blocks:
+            try:
+                ast.parse(code)
+            except SyntaxError as error:
+                raise AssertionError(f"{notebook.name}, solution {heading!r}: {error}") from None

@@ -1,13 +1,16 @@
-"""Execute the chapters in full mode and fail if any claim (an ``assert`` in a cell) does not hold.
+"""Execute the chapters in full mode, with their exercises' solutions, and fail if any claim (an
+``assert`` in a cell) does not hold or a solution does not run.
 
 Usage (through the Makefile)::
 
     make check-full            # every notebook, in order
     make check-full NB=04      # the notebooks whose name starts with 04
 
-Each notebook runs in a fresh kernel with ``GESTURELIB_QUICK=0``, from ``notebooks/``. The executed
-copy, with its pictures, is written to ``outputs/check-full/`` so that a person can read the
-chapter as a student sees it. Trained models are cached in ``checkpoints/`` by the notebooks' own
+Each notebook runs in a fresh kernel with ``GESTURELIB_QUICK=0``, from ``notebooks/``, followed by
+every ``python`` block of its solutions in ``docs/solutions/`` (one cell each, in the notebook's
+namespace, as a student runs them). The executed copy, solutions included, with its pictures, is
+written to ``outputs/check-full/`` so that a person can read the chapter as a student sees it;
+``tools/run_solutions.py`` prints what each solution prints, to quote it. Trained models are cached in ``checkpoints/`` by the notebooks' own
 load-or-train helper, so a second run only retrains what changed. Quick mode shows that the code
 runs; this shows that the text is true.
 """
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -26,6 +30,7 @@ from nbclient.exceptions import CellExecutionError
 
 REPO = Path(__file__).resolve().parent.parent
 NOTEBOOKS = REPO / "notebooks"
+SOLUTIONS = REPO / "docs" / "solutions"
 OUT = REPO / "outputs" / "check-full"
 
 
@@ -37,9 +42,29 @@ def chapters(prefix: str) -> list[Path]:
     return found
 
 
+def solution_blocks(path: Path) -> list[tuple[str, str]]:
+    """``(heading, code)`` of every python block of a solutions file, in order."""
+    blocks, heading = [], ""
+    for part in re.split(r"(^## .*$)", path.read_text(), flags=re.MULTILINE):
+        if part.startswith("## "):
+            heading = part[3:].strip()
+            continue
+        blocks += [(heading, code) for code in re.findall(r"```python\n(.*?)```", part, re.S)]
+    return blocks
+
+
+def solutions_of(path: Path) -> list[tuple[str, str]]:
+    """The solution blocks of the chapter ``path`` (none if it has no solutions file)."""
+    found = sorted(SOLUTIONS.glob(f"{path.name[:2]}_*.md"))
+    assert len(found) <= 1, f"more than one solutions file for {path.name}: {found}"
+    return solution_blocks(found[0]) if found else []
+
+
 def execute(path: Path) -> tuple[bool, float, str]:
-    """Run one notebook in full mode; return (passed, seconds, the failure's last lines)."""
+    """Run one notebook in full mode, then its solutions; return (passed, seconds, the failure's
+    last lines)."""
     notebook = nbformat.read(path, as_version=4)
+    notebook.cells += [nbformat.v4.new_code_cell(code) for _, code in solutions_of(path)]
     client = NotebookClient(
         notebook, timeout=None, kernel_name="python3", resources={"metadata": {"path": NOTEBOOKS}}
     )

@@ -9,35 +9,22 @@ The solutions in ``docs/solutions/`` are written to run at the end of their note
 namespace; the figures they quote must come from such a run. This executes the notebook and then
 every ``python`` code block of the solutions file, one cell each, in a fresh kernel, and prints
 each block's output under its exercise's heading. The executed notebook, solutions included, is
-written to ``outputs/solutions/`` with its pictures.
+written to ``outputs/solutions/`` with its pictures. (``make check-full`` runs the solutions too,
+after each chapter, and fails where one does not run; this prints what they print.)
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import re
 import sys
-from pathlib import Path
 
 import nbformat
-from check_full import NOTEBOOKS, REPO, chapters
+from check_full import NOTEBOOKS, REPO, chapters, solutions_of
 from nbclient import NotebookClient
 from nbclient.exceptions import CellExecutionError
 
-SOLUTIONS = REPO / "docs" / "solutions"
 OUT = REPO / "outputs" / "solutions"
-
-
-def solution_blocks(path: Path) -> list[tuple[str, str]]:
-    """``(heading, code)`` of every python block of a solutions file, in order."""
-    blocks, heading = [], ""
-    for part in re.split(r"(^## .*$)", path.read_text(), flags=re.MULTILINE):
-        if part.startswith("## "):
-            heading = part[3:].strip()
-            continue
-        blocks += [(heading, code) for code in re.findall(r"```python\n(.*?)```", part, re.S)]
-    return blocks
 
 
 def main() -> int:
@@ -46,16 +33,13 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="quick mode instead of full mode")
     args = parser.parse_args()
     (notebook_path,) = chapters(args.prefix)
-    found = sorted(SOLUTIONS.glob(f"{args.prefix}*.md"))
-    if len(found) != 1:
-        raise SystemExit(
-            f"run_solutions: expected one {SOLUTIONS}/{args.prefix}*.md, found {found}"
-        )
+    blocks = solutions_of(notebook_path)
+    if not blocks:
+        raise SystemExit(f"run_solutions: {notebook_path.name} has no solutions to run")
     os.environ["GESTURELIB_QUICK"] = "1" if args.quick else "0"
     os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
     notebook = nbformat.read(notebook_path, as_version=4)
     first = len(notebook.cells)
-    blocks = solution_blocks(found[0])
     notebook.cells += [nbformat.v4.new_code_cell(code) for _, code in blocks]
     client = NotebookClient(
         notebook, timeout=None, kernel_name="python3", resources={"metadata": {"path": NOTEBOOKS}}
