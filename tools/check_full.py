@@ -10,9 +10,9 @@ Each notebook runs in a fresh kernel with ``GESTURELIB_QUICK=0``, from ``noteboo
 every ``python`` block of its solutions in ``docs/solutions/`` (one cell each, in the notebook's
 namespace, as a student runs them). The executed copy, solutions included, with its pictures, is
 written to ``outputs/check-full/`` so that a person can read the chapter as a student sees it;
-``tools/run_solutions.py`` prints what each solution prints, to quote it. Trained models are cached in ``checkpoints/`` by the notebooks' own
-load-or-train helper, so a second run only retrains what changed. Quick mode shows that the code
-runs; this shows that the text is true.
+``tools/run_solutions.py`` prints what each solution prints, to quote it. Trained models are
+cached in ``checkpoints/`` by the notebooks' own load-or-train helper, so a second run only
+retrains what changed. Quick mode shows that the code runs; this shows that the text is true.
 """
 
 from __future__ import annotations
