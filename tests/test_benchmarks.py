@@ -82,19 +82,28 @@ def test_flowvae_ablation_benchmark_reports_both_losses_over_seeds():
 
 
 def test_own_voice_benchmark_reports_each_recording():
-    output = run("bench_own_voice.py", "gesturelib/pretrained/moglow", "--samples", "1")
+    arguments = ("gesturelib/pretrained/moglow", "--samples", "1", "--generated", "1")
+    output = run("bench_own_voice.py", *arguments)
     rows = [line for line in output.splitlines() if line.startswith("| `")]
     assert len(rows) == 5  # the recordings of tests/data/voices
     ratios = [float(row.split("|")[2]) for row in rows]
     median = re.search(r"moglow: median ratio ([0-9.]+)", output)
     assert median and float(median[1]) == pytest.approx(sorted(ratios)[2], abs=0.006)
+    reference = re.search(
+        r"layout \(1 conversation\): ground truth ([0-9.]+), moglow [0-9.]+", output
+    )
+    assert reference and float(reference[1]) > 1, output  # the data's agent moves more in speech
     # At T = 0 every sample of a recording is the same motion: the same leads.
-    output = run("bench_own_voice.py", "gesturelib/pretrained/flowvae", "--temperature", "0")
+    arguments = ("gesturelib/pretrained/flowvae", "--temperature", "0", "--generated", "0")
+    output = run("bench_own_voice.py", *arguments)
+    assert "layout" not in output
     rows = [line for line in output.splitlines() if line.startswith("| `")]
     leads = [{lead.strip() for lead in row.split("|")[3].split(",")} for row in rows]
     assert len(rows) == 5 and all(len(same) == 1 for same in leads), rows
     refused = launch("bench_own_voice.py", "--temperature", "-1")
     assert refused.returncode == 2 and "--temperature: temperature must lie in" in refused.stderr
+    refused = launch("bench_own_voice.py", "--generated", "-1")
+    assert refused.returncode == 2 and "--generated must be at least 0" in refused.stderr
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")
