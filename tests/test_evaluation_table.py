@@ -78,6 +78,10 @@ def test_a_row_is_the_mean_and_spread_over_every_draw_of_every_run(monkeypatch):
     assert np.isnan(row["hellinger"]) and row["diversity"] == 0.0  # undefined once: undefined
     assert row["transfer"] == pytest.approx(0.3)  # one value per run, like diversity
     assert row["transfer_sd"] == pytest.approx(np.std([0.2, 0.4], ddof=1))
+    assert np.isnan(row["drift"])  # none given: a reference
+    values = iter([1.0, 2.0])
+    row = score_system([None], [[[motion]], [[motion]]], drifts=[1.0, 1.5])
+    assert row["drift"] == pytest.approx(1.25)  # one value per run, too
 
 
 def test_runs_of_several_seeds_share_a_row_named_by_their_folders():
@@ -127,6 +131,8 @@ def test_evaluate_writes_the_table_models_and_figures(tmp_path, moglow_run, tiny
     # Style transfer: scored for MoGlow alone (one training conversation here: too few
     # references for a slope; style_transfer's own test has its arithmetic).
     monkeypatch.setattr(evaluation_table, "style_transfer", lambda *_: 0.25)
+    # Drift compares the last chunk with the first: chunks of 4 s fit the 10 s conversations.
+    monkeypatch.setattr(evaluation_table, "DRIFT_CHUNK_S", 4.0)
     out = tmp_path / "evaluation"
     arguments = ["evaluate", str(moglow_run), "--out", str(out), "--quick", "--data"]
     assert main([*arguments, str(tiny_data), "--samples", "2", "--cache", str(tmp_path)]) == 0
@@ -136,6 +142,8 @@ def test_evaluate_writes_the_table_models_and_figures(tmp_path, moglow_run, tiny
     assert np.isfinite(table["moglow"]["fgd"]) and table["floor"]["fgd"] < table["mean_pose"]["fgd"]
     assert table["moglow"]["transfer"] == 0.25
     assert all(np.isnan(table[name]["transfer"]) for name in REFERENCES)
+    assert table["moglow"]["drift"] > 0 and np.isnan(table["moglow"]["drift_sd"])  # one run
+    assert all(np.isnan(table[name]["drift"]) for name in REFERENCES)
     with open(out / "models.csv") as file:
         models = list(csv.DictReader(file))
     assert models[0]["system"] == "moglow" and int(models[0]["parameters"]) > 1000
@@ -153,3 +161,37 @@ def test_evaluate_refuses_what_it_cannot_score(tmp_path, moglow_run, tiny_data, 
     assert "two rows would be called 'floor'" in capsys.readouterr().err
     assert main(["evaluate", str(moglow_run), str(moglow_run), "--out", out]) == 2
     assert "given twice" in capsys.readouterr().err
+
+
+def test_style_control_summarises_the_shares_over_runs(tmp_path):
+    from gesturelib.evaluation.report import (
+        style_control,
+        style_control_table,
+        write_style_control,
+    )
+    from gesturelib.evaluation.style_control import StyleResponse
+    from gesturelib.style import STYLE_FEATURES
+
+    def run(share):
+        levels = np.array([0.0, 1.0, 2.0])
+        response = StyleResponse(levels, share * levels, share, 1.0)
+        return dict.fromkeys(STYLE_FEATURES, response)
+
+    rows = style_control([run(0.4), run(0.6)])
+    assert list(rows) == list(STYLE_FEATURES)
+    assert rows["hand_speed"]["share"] == pytest.approx(0.5) and rows["hand_speed"]["seeds"] == 2
+    assert rows["hand_speed"]["share_sd"] == pytest.approx(np.std([0.4, 0.6], ddof=1))
+    table = style_control_table(rows, "moglow, style inputs").splitlines()
+    assert table[0].startswith("| system | hand height (share realised) |")
+    assert table[2] == "| `moglow, style inputs` |" + " 0.50 ± 0.14 |" * 4
+    with open(write_style_control(style_control([run(0.3)]), tmp_path / "style.csv")) as file:
+        lines = list(csv.reader(file))
+    assert lines[0] == [
+        "feature",
+        "seeds",
+        "share",
+        "share_sd",
+        "rank_correlation",
+        "rank_correlation_sd",
+    ]
+    assert lines[1] == ["hand_height", "1", "0.3", "", "1", ""]  # one run: no spread

@@ -3,9 +3,12 @@
 Trains every generating model of the course (full mode unless ``--quick``) from ``--seeds``
 seeds through the shared load-or-train cache (``checkpoints/``: the chapters' runs are reused,
 and an interrupted run resumes), evaluates them with the references on the held-out
-conversations (:func:`gesturelib.evaluation.table.evaluate_models`, 3 samples each), writes
-``metrics.csv``, ``models.csv`` and the figures to ``outputs/results/`` (``outputs/results-quick/``
-in quick mode), and, in full mode, the table between the README's ``results`` markers.
+conversations (:func:`gesturelib.evaluation.table.evaluate_models`, 3 samples each), and
+MoGlow trained with its style inputs on the share of a style asked that comes out
+(:func:`gesturelib.evaluation.style_control.style_response`); writes ``metrics.csv``,
+``models.csv``, ``style_control.csv`` and the figures to ``outputs/results/``
+(``outputs/results-quick/`` in quick mode), and, in full mode, the two tables between the
+README's ``results`` markers.
 
 Usage::
 
@@ -30,6 +33,7 @@ import torch
 from data_synth import course_data, load_dataset
 from gesturelib.evaluation import report
 from gesturelib.evaluation.fgd import feature_network
+from gesturelib.evaluation.style_control import style_response
 from gesturelib.evaluation.table import evaluate_models
 from gesturelib.pipeline import train_model
 from gesturelib.recipes import GENERATORS
@@ -37,6 +41,8 @@ from gesturelib.recipes import GENERATORS
 REPO = Path(__file__).resolve().parents[1]
 MODELS = GENERATORS  # every model of the course that generates motion, in chapter order
 MARKERS = ("<!-- results:start -->", "<!-- results:end -->")
+#: Samples per held-out conversation and style level for the style control (chapter 05's).
+STYLE_SAMPLES = 2
 
 
 def main() -> int:
@@ -73,6 +79,20 @@ def main() -> int:
             )
             models.setdefault(name, []).append((run.model, run.normaliser))
             histories.setdefault(name, []).append((run.model, run.history))
+    styled = []  # MoGlow with its style inputs (chapter 05): how much of a style asked comes out
+    if "moglow" in args.models:
+        for seed in range(args.seeds):
+            print(f"moglow with style inputs, seed {seed} ...", flush=True)
+            run = train_model(
+                "moglow",
+                splits,
+                quick=args.quick,
+                seed=seed,
+                model_changes={"style": True},
+                cache=cache,
+                progress=False,
+            )
+            styled.append((run.model, run.normaliser))
     print(f"Models ready after {(time.perf_counter() - started) / 60:.1f} min")
     if set(args.models) != set(MODELS):
         return 0
@@ -88,7 +108,19 @@ def main() -> int:
     out = REPO / "outputs" / ("results-quick" if args.quick else "results")
     out.mkdir(parents=True, exist_ok=True)
     report.write_evaluation(rows, draws, histories, splits, out)
-    table = report.markdown_table(rows, report.models_table(histories))
+    style = report.style_control(
+        [
+            style_response(model, normaliser, splits["test"], STYLE_SAMPLES)
+            for model, normaliser in styled
+        ]
+    )
+    report.write_style_control(style, out / "style_control.csv")
+    table = "\n\n".join(
+        [
+            report.markdown_table(rows, report.models_table(histories)),
+            report.style_control_table(style, "moglow, style inputs"),
+        ]
+    )
     print(table)
     if not args.quick:
         text = readme.read_text()

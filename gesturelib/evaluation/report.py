@@ -7,11 +7,14 @@ lists the measures.
 from __future__ import annotations
 
 import csv
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from gesturelib.evaluation.style_control import StyleResponse
 from gesturelib.evaluation.table import METRICS, REFERENCES, mean_pose_of
+from gesturelib.style import STYLE_FEATURES
 
 #: Columns of ``models.csv``.
 MODEL_COLUMNS = (
@@ -140,6 +143,7 @@ README_COLUMNS = (
     ("nods", "nods", 2),
     ("nod precision", "nod_precision", 2),
     ("style transfer (1 = full)", "transfer", 2),
+    ("drift (1 = none)", "drift", 2),
 )
 
 
@@ -161,3 +165,48 @@ def markdown_table(metrics: dict[str, dict], models: dict[str, dict]) -> str:
         )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def style_control(runs: Sequence[Mapping[str, StyleResponse]]) -> dict[str, dict[str, float]]:
+    """Per style feature, over the runs of one model (one
+    :func:`~gesturelib.evaluation.style_control.style_response` each): the ``share`` of the change
+    asked that its samples realise and the ``rank_correlation`` of asked and realised, each with
+    its ``_sd`` over runs (NaN for one run), and ``seeds``."""
+    rows = {}
+    for feature in STYLE_FEATURES:
+        row = {"seeds": len(runs)}
+        for measure in ("share", "rank_correlation"):
+            values = np.array([getattr(run[feature], measure) for run in runs])
+            row[measure] = float(values.mean())
+            row[f"{measure}_sd"] = float(values.std(ddof=1)) if len(runs) > 1 else np.nan
+        rows[feature] = row
+    return rows
+
+
+def write_style_control(rows: dict[str, dict[str, float]], path: str | Path) -> Path:
+    """Write :func:`style_control`'s rows as CSV (``style_control.csv``): a ``feature`` column,
+    then ``seeds``, ``share``, ``share_sd``, ``rank_correlation``, ``rank_correlation_sd``."""
+    columns = ("seeds", "share", "share_sd", "rank_correlation", "rank_correlation_sd")
+    with open(path, "w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(("feature", *columns))
+        for feature, row in rows.items():
+            writer.writerow([feature] + [_cell(row[c]) for c in columns])
+    return Path(path)
+
+
+def style_control_table(rows: dict[str, dict[str, float]], system: str) -> str:
+    """The README's style-control table: one row, ``system``, with the share of the change asked
+    realised per style feature (mean ± sd over runs)."""
+    headings = ["system", *(f"{f.replace('_', ' ')} (share realised)" for f in rows)]
+    cells = [f"`{system}`"]
+    for row in rows.values():
+        sd = "" if np.isnan(row["share_sd"]) else f" ± {row['share_sd']:.2f}"
+        cells.append(f"{row['share']:.2f}{sd}")
+    return "\n".join(
+        [
+            "| " + " | ".join(headings) + " |",
+            "|" + "---|" * len(headings),
+            "| " + " | ".join(cells) + " |",
+        ]
+    )

@@ -27,6 +27,8 @@ import numpy as np
 
 from gesturelib.conventions import FPS
 from gesturelib.evaluation.headline import (
+    DRIFT_CHUNK_S,
+    drift,
     headline_measures,
     joint_speed_histogram,
     reference_motions,
@@ -59,6 +61,8 @@ METRICS: dict[str, str] = {
     "beat_align": "Bailando's beat-alignment score against speech onsets (the field's proxy)",
     "transfer": "slope of the style realised against a reference's, by its latent codes, averaged"
     " over the style features (1: taken in full; models that replay a reference only)",
+    "drift": "limb-angle error to the ground truth in the last 10 s over the first 10 s, the"
+    " samples averaged first (1: an error that does not grow; models only)",
 }
 
 #: The references' row names (:func:`reference_draws`).
@@ -106,7 +110,7 @@ def diversity(samples: Sequence[Sequence[np.ndarray]]) -> float:
 
 
 def score_system(
-    conversations, runs: Draws, features=None, deterministic=False, transfer=()
+    conversations, runs: Draws, features=None, deterministic=False, transfer=(), drifts=()
 ) -> dict:
     """One row of the table: each measure's mean over the draws of every run and its standard
     deviation (``<name>_sd``), and ``seeds``, the number of runs. A measure undefined for any draw
@@ -116,13 +120,16 @@ def score_system(
     ``deterministic``: the system gives one motion per conversation whatever is drawn (a run is
     one draw), so its diversity is 0. ``transfer``: each run's
     :func:`~gesturelib.evaluation.transfer.style_transfer`, for a model that replays a reference
-    (NaN without).
+    (NaN without). ``drifts``: each run's :func:`~gesturelib.evaluation.headline.drift`, for a
+    model (NaN without).
     """
     assert len(transfer) in (0, len(runs)), "one transfer per run, or none"
+    assert len(drifts) in (0, len(runs)), "one drift per run, or none"
     draws = [score_draw(conversations, sample, features) for run in runs for sample in run]
     per_run = {
         "diversity": [0.0 if deterministic else diversity(run) for run in runs],
         "transfer": list(transfer) or [np.nan],
+        "drift": list(drifts) or [np.nan],
     }
     row: dict[str, float] = {"seeds": len(runs)}
     for name in METRICS:
@@ -235,10 +242,13 @@ def evaluate_models(models: dict, splits, samples: int = 3, features=None) -> tu
     fixed = {"mean_pose"}
     if any(runs[0][0].noise_dim == 0 for runs in models.values()):
         draws["ground_truth+smoothed"] = [positions_of([[c.rotations for c in test]], True)]
+    drifts = {}  # where the conversations hold two chunks to compare
+    long_enough = min(len(c.rotations) for c in test) >= 2 * DRIFT_CHUNK_S * FPS
     for name, runs in models.items():
         rotations = [
             model_rotations(test, model, normaliser, samples) for model, normaliser in runs
         ]
+        drifts[name] = [drift(r, test, DRIFT_CHUNK_S) for r in rotations] if long_enough else []
         draws[name] = [positions_of(r) for r in rotations]
         if runs[0][0].noise_dim == 0:
             fixed |= {name, f"{name}+smoothed"}
@@ -249,7 +259,9 @@ def evaluate_models(models: dict, splits, samples: int = 3, features=None) -> tu
         if hasattr(runs[0][0], "latents")
     }
     rows = {
-        name: score_system(test, runs, features, name in fixed, transfers.get(name, ()))
+        name: score_system(
+            test, runs, features, name in fixed, transfers.get(name, ()), drifts.get(name, ())
+        )
         for name, runs in draws.items()
     }
     return rows, draws
