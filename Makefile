@@ -45,8 +45,9 @@ NB ?=
 check-full: setup
 	$(BIN)/python tools/check_full.py $(NB)
 
-## make results: every model from three seeds against the references (full mode, about two
-## hours the first time); writes outputs/results/ and the README's results table
+## make results: every model from three seeds against the references, and MoGlow's style
+## control (full mode, about two hours the first time); writes outputs/results/ and the
+## README's results tables
 results: setup
 	$(BIN)/python tools/results.py
 
