@@ -14,10 +14,14 @@ then, as a reference, the ratio of the ground truth and of each model on a few o
 conversations laid out like the recordings (one phrase of the agent, then 3-4 s of silence, no
 partner): what the layout alone gives, with voices the models know.
 
+``--recordings DIR`` measures another folder of recordings instead (FLAC or WAV files), such as
+the selection set of ``tools/make_test_voices.py --selection DIR``: to choose between recipes or
+front ends on recordings other than the five that test them.
+
 Usage (the shipped models by default; any run folders of generative models otherwise)::
 
     .venv/bin/python benchmarks/bench_own_voice.py [RUN ...] [--samples 3] [--temperature 0.8]
-        [--generated 6]
+        [--generated 6] [--recordings DIR]
 """
 
 from __future__ import annotations
@@ -91,7 +95,19 @@ def main() -> None:
         default=6,
         help="the generator's conversations in the recordings' layout, as a reference (0: none)",
     )
+    parser.add_argument(
+        "--recordings",
+        type=Path,
+        default=VOICES,
+        metavar="DIR",
+        help="a folder of recordings (.flac, .wav) to measure (default: tests/data/voices)",
+    )
     args = parser.parse_args()
+    recordings = sorted(
+        path for path in args.recordings.glob("*") if path.suffix.lower() in (".flac", ".wav")
+    )
+    if not recordings:
+        parser.error(f"--recordings: {args.recordings} holds no .flac or .wav recordings")
     if args.samples < 1:
         parser.error(f"--samples must be at least 1, got {args.samples}")
     if args.generated < 0:
@@ -104,7 +120,6 @@ def main() -> None:
     runs = args.runs or [pretrained_folder(name) for name in NAMES]
     if len({run.name for run in runs}) < len(runs):
         parser.error("give run folders of different names: the table is headed by them")
-    recordings = sorted(VOICES.glob("*.flac"))
     torch.set_num_threads(1)  # frame-by-frame generation is small work: one thread is fastest
 
     laid_out = laid_out_like_the_recordings(args.generated)

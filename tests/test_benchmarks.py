@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -104,6 +105,18 @@ def test_own_voice_benchmark_reports_each_recording():
     assert refused.returncode == 2 and "--temperature: temperature must lie in" in refused.stderr
     refused = launch("bench_own_voice.py", "--generated", "-1")
     assert refused.returncode == 2 and "--generated must be at least 0" in refused.stderr
+
+
+def test_own_voice_benchmark_measures_another_folder_of_recordings(tmp_path):
+    voices = Path(__file__).resolve().parent / "data" / "voices"
+    shutil.copy(voices / "us_clean.flac", tmp_path / "mine.flac")
+    arguments = ("gesturelib/pretrained/flowvae", "--samples", "1", "--generated", "0")
+    output = run("bench_own_voice.py", *arguments, "--recordings", str(tmp_path))
+    rows = [line for line in output.splitlines() if line.startswith("| `")]
+    assert len(rows) == 1 and rows[0].startswith("| `mine` |"), output
+    (tmp_path / "mine.flac").unlink()
+    refused = launch("bench_own_voice.py", "--recordings", str(tmp_path))
+    assert refused.returncode == 2 and "holds no .flac or .wav recordings" in refused.stderr
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")

@@ -6,13 +6,19 @@ silence, then phrases with pauses of 3-4 s between them (long enough for the age
 retract its hands and rest before it prepares the next gesture), then two seconds of silence, so
 that the speech and the silences are known (written beside the recordings in ``voices.csv``).
 
+A second set, the *selection* recordings, is made the same way with other voices and sentences
+and is not committed: eight recordings to choose a front end or a recipe by, so that the five
+stay a test that nothing was tuned on (``benchmarks/bench_own_voice.py --recordings DIR``).
+
 Needs Debian's espeak-ng and sox (``apt-get install espeak-ng sox``). Run from the repository root:
 
-    python tools/make_test_voices.py          # writes tests/data/voices/
+    python tools/make_test_voices.py                       # writes tests/data/voices/
+    python tools/make_test_voices.py --selection DIR       # the eight selection recordings
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
 import subprocess
 import sys
@@ -39,6 +45,25 @@ RECORDINGS = {
     "us_female_noise": ("en-us+f3", 170, 60, [], "0.02", 16000),
     "scottish_phone": ("en-gb-scotland", 155, 35, ["sinc", "300-3400"], "0.01", 8000),
     "caribbean_room": ("en-029", 165, 55, ["reverb", "30", "50", "60"], "0.01", 24000),
+}
+#: The selection set: other sentences, other voices, the same kinds of degradation.
+SELECTION_PHRASES = (
+    "The train was late again, so we walked the whole way to the station.",
+    "My sister said the market had the best bread she had ever tasted.",
+    "We waited for an hour, and then the rain finally stopped for good.",
+    "Could you send me the pictures from the party last weekend, please?",
+    "I never thought that a small garden could grow so many tomatoes.",
+    "After the concert we talked about the music until very late.",
+)
+SELECTION = {
+    "v_us_m3_clean": ("en-us+m3", 165, 50, [], None, 22050),
+    "v_gb_f2_reverb": ("en-gb+f2", 155, 55, ["reverb", "60", "50", "90"], None, 22050),
+    "v_rp_f4_noise": ("en-gb-x-rp+f4", 160, 55, [], "0.015", 16000),
+    "v_029_m2_phone": ("en-029+m2", 150, 40, ["sinc", "300-3400"], "0.01", 8000),
+    "v_scot_f1_room": ("en-gb-scotland+f1", 170, 60, ["reverb", "40", "50", "70"], "0.005", 24000),
+    "v_us_f3_reverb": ("en-us+f3", 160, 60, ["reverb", "50", "50", "80"], None, 22050),
+    "v_gb_m1_noise": ("en-gb", 150, 35, [], "0.02", 22050),
+    "v_us_m7_clean": ("en-us+m7", 175, 45, [], None, 16000),
 }
 SILENCE_S = 2.0  # before the first phrase and after the last
 PAUSES_S = (3.0, 4.0)  # the agent retracts its hands for a second after a phrase
@@ -81,14 +106,17 @@ def degrade(
     return degraded
 
 
-def main() -> int:
-    OUT.mkdir(parents=True, exist_ok=True)
+def make(out: Path, recordings: dict, phrase_pool: tuple[str, ...]) -> None:
+    """Write ``recordings`` (name -> recipe, as :data:`RECORDINGS`) into ``out`` with
+    ``voices.csv``; recording ``i`` speaks the first three sentences of ``phrase_pool`` when ``i``
+    is even, the last three when odd."""
+    out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for number, (name, recipe) in enumerate(RECORDINGS.items()):
+    for number, (name, recipe) in enumerate(recordings.items()):
         voice, speed, pitch, effects, noise_level, rate = recipe
         with tempfile.TemporaryDirectory() as folder:
             folder = Path(folder)
-            phrases = PHRASES[3 * (number % 2) : 3 * (number % 2) + 3]
+            phrases = phrase_pool[3 * (number % 2) : 3 * (number % 2) + 3]
             pieces, spans, at = [np.zeros(int(SILENCE_S * 22050), np.float32)], [], SILENCE_S
             for index, text in enumerate(phrases):
                 spoken = speak(text, voice, speed, pitch, folder)
@@ -101,7 +129,7 @@ def main() -> int:
             degraded = degrade(audio, effects, noise_level, rate, folder)
         # Headroom: 0.9 of the level sox gave, and never a peak above 0.81 of full scale.
         degraded = 0.9 * degraded / max(1.0, float(np.abs(degraded).max()) / 0.9)
-        path = OUT / f"{name}.flac"
+        path = out / f"{name}.flac"
         soundfile.write(path, degraded, rate, subtype="PCM_16")
         for start, end in spans:
             rows.append(
@@ -115,10 +143,27 @@ def main() -> int:
             f"{path}: {len(degraded) / rate:.1f} s at {rate} Hz, {voice}, "
             f"{' '.join(effects) or 'no effects'}, noise {noise_level}"
         )
-    with open(OUT / "voices.csv", "w", newline="") as file:
+    with open(out / "voices.csv", "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--selection",
+        type=Path,
+        metavar="DIR",
+        help="write the eight selection recordings into DIR instead of the committed five",
+    )
+    args = parser.parse_args()
+    if args.selection is None:
+        make(OUT, RECORDINGS, PHRASES)
+    elif args.selection.resolve() == OUT.resolve():
+        parser.error(f"{args.selection} holds the committed recordings; choose another folder")
+    else:
+        make(args.selection, SELECTION, SELECTION_PHRASES)
     return 0
 
 
