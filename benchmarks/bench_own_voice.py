@@ -103,8 +103,14 @@ def main() -> None:
         help="a folder of recordings (.flac, .wav) to measure (default: tests/data/voices)",
     )
     args = parser.parse_args()
+    if not args.recordings.is_dir():
+        parser.error(f"--recordings: {args.recordings} is not a folder")
     recordings = sorted(
-        path for path in args.recordings.glob("*") if path.suffix.lower() in (".flac", ".wav")
+        path
+        for path in args.recordings.iterdir()
+        if path.is_file()
+        and not path.name.startswith(".")
+        and path.suffix.lower() in (".flac", ".wav")
     )
     if not recordings:
         parser.error(f"--recordings: {args.recordings} holds no .flac or .wav recordings")

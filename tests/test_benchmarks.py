@@ -109,14 +109,17 @@ def test_own_voice_benchmark_reports_each_recording():
 
 def test_own_voice_benchmark_measures_another_folder_of_recordings(tmp_path):
     voices = Path(__file__).resolve().parent / "data" / "voices"
-    shutil.copy(voices / "us_clean.flac", tmp_path / "mine.flac")
+    shutil.copy(voices / "us_clean.flac", tmp_path / "mine.FLAC")
+    (tmp_path / ".mine.wav").write_bytes(b"not a recording: a dotfile is passed over")
     arguments = ("gesturelib/pretrained/flowvae", "--samples", "1", "--generated", "0")
     output = run("bench_own_voice.py", *arguments, "--recordings", str(tmp_path))
     rows = [line for line in output.splitlines() if line.startswith("| `")]
     assert len(rows) == 1 and rows[0].startswith("| `mine` |"), output
-    (tmp_path / "mine.flac").unlink()
+    (tmp_path / "mine.FLAC").unlink()
     refused = launch("bench_own_voice.py", "--recordings", str(tmp_path))
     assert refused.returncode == 2 and "holds no .flac or .wav recordings" in refused.stderr
+    refused = launch("bench_own_voice.py", "--recordings", str(tmp_path / "absent"))
+    assert refused.returncode == 2 and "is not a folder" in refused.stderr
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")

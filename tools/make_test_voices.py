@@ -6,8 +6,8 @@ silence, then phrases with pauses of 3-4 s between them (long enough for the age
 retract its hands and rest before it prepares the next gesture), then two seconds of silence, so
 that the speech and the silences are known (written beside the recordings in ``voices.csv``).
 
-A second set, the *selection* recordings, is made the same way with other voices and sentences
-and is not committed: eight recordings to choose a front end or a recipe by, so that the five
+A second set, the *selection* recordings, is made the same way with other sentences, mostly other
+voices (one is the test's female voice in the test's reverberant room), and is not committed: eight recordings to choose a front end or a recipe by, so that the five
 stay a test that nothing was tuned on (``benchmarks/bench_own_voice.py --recordings DIR``).
 
 Needs Debian's espeak-ng and sox (``apt-get install espeak-ng sox``). Run from the repository root:
@@ -62,7 +62,7 @@ SELECTION = {
     "v_029_m2_phone": ("en-029+m2", 150, 40, ["sinc", "300-3400"], "0.01", 8000),
     "v_scot_f1_room": ("en-gb-scotland+f1", 170, 60, ["reverb", "40", "50", "70"], "0.005", 24000),
     "v_us_f3_reverb": ("en-us+f3", 160, 60, ["reverb", "50", "50", "80"], None, 22050),
-    "v_gb_m1_noise": ("en-gb", 150, 35, [], "0.02", 22050),
+    "v_gb_noise": ("en-gb", 150, 35, [], "0.02", 22050),
     "v_us_m7_clean": ("en-us+m7", 175, 45, [], None, 16000),
 }
 SILENCE_S = 2.0  # before the first phrase and after the last
@@ -160,10 +160,13 @@ def main() -> int:
     args = parser.parse_args()
     if args.selection is None:
         make(OUT, RECORDINGS, PHRASES)
-    elif args.selection.resolve() == OUT.resolve():
-        parser.error(f"{args.selection} holds the committed recordings; choose another folder")
-    else:
-        make(args.selection, SELECTION, SELECTION_PHRASES)
+        return 0
+    folder = args.selection.resolve()
+    if folder == OUT.resolve() or OUT.resolve() in folder.parents:
+        parser.error(f"{args.selection} is in the committed recordings' folder; choose another")
+    if folder.exists() and not folder.is_dir():
+        parser.error(f"{args.selection} is a file; give a folder for the selection recordings")
+    make(folder, SELECTION, SELECTION_PHRASES)
     return 0
 
 
