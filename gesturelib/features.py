@@ -42,6 +42,7 @@ from pathlib import Path
 import librosa
 import numpy as np
 import scipy.fft
+import scipy.optimize
 import soundfile
 
 from gesturelib.conventions import FPS, N_MELS, SAMPLE_RATE, Activity
@@ -400,6 +401,10 @@ SPEECH_LEVEL_PERCENTILE = 95
 #: rises 20 dB and more above a pause), so that a recording of silence or of steady noise is not
 #: blown up into speech-sized features.
 MIN_SPEECH_RANGE = 2.0
+#: ...and at most this many (about 35 dB): the widest range of the generator's recordings, whose
+#: noise floors lie 30 to 60 dB under their peak. A recording with a wider one is heard as if a
+#: noise floor brought it down to this (:func:`speech_features`).
+MAX_SPEECH_RANGE = 8.0
 
 
 def speech_features(
@@ -422,6 +427,13 @@ def speech_features(
     making its quiet pauses read as speech. A recording of nothing but digital silence reads 0
     throughout.
 
+    The speech level is taken as at most :data:`MAX_SPEECH_RANGE` nats above the floor, the
+    widest range of the generator's recordings. A recording whose range is wider (one whose room
+    echoes into digital silence: its floor is the echo's last whisper) is heard as if a steady
+    noise lay under it, just loud enough to bring the range down to that (:func:`_under_noise`):
+    an echo far below the speech then reads near 0, as it would in any recording the models
+    learned from, and how far down the recording's own floor lies no longer matters.
+
     The statistics are the recording's, so features of a clip cut from a longer recording differ
     slightly from the same frames of the whole: compute them on what the model will hear.
     """
@@ -439,7 +451,29 @@ def speech_features(
     above = log_mel - log_mel[quiet].mean(axis=0)  # (T, n_mels) minus the floor (n_mels,)
     above[~sound] = 0.0
     level = np.percentile(above[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
+    if level > MAX_SPEECH_RANGE:
+        above = _under_noise(above, measured, MAX_SPEECH_RANGE)
+        level = MAX_SPEECH_RANGE
     return (above / max(float(level), MIN_SPEECH_RANGE)).astype(np.float32)
+
+
+def _under_noise(above: np.ndarray, measured: np.ndarray, speech_range: float) -> np.ndarray:
+    """``above`` ``(T, n_mels)`` (nats over each band's floor) as heard under a noise floor ``c``
+    times the measured one, ``c`` such that the speech level reads ``speech_range`` nats over it.
+
+    A band ``a`` nats over its floor holds ``e^a`` times the floor's power; with ``c`` floors
+    more, it holds ``e^a + c`` over a floor of ``1 + c``. Digital silence (0) stays 0."""
+
+    def heard(log_c: float) -> np.ndarray:
+        # in above's precision, so that a band at its floor (0) comes out exactly 0
+        return np.logaddexp(above, log_c) - np.logaddexp(np.zeros(1, above.dtype), log_c)
+
+    def excess(log_c: float) -> float:
+        level = np.percentile(heard(log_c)[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
+        return level - speech_range
+
+    # The level falls from the recording's own (c -> 0) towards 0 (c -> infinity).
+    return heard(scipy.optimize.brentq(excess, -30.0, 60.0, xtol=1e-6))
 
 
 def _measurable(sound: np.ndarray) -> np.ndarray:

@@ -11,6 +11,8 @@ import scipy.fft
 import scipy.signal
 import soundfile
 
+from data_synth import ConversationConfig, generate_conversation
+from data_synth.config import VoiceConfig
 from gesturelib import features
 from gesturelib.conventions import Activity
 from gesturelib.features import (
@@ -478,12 +480,52 @@ def test_digital_silence_neither_sets_the_floor_nor_lifts_a_room_s_pauses(lead_i
     assert abs(int(voiced.sum()) - int(features.voice_activity(noisy, 16000).sum())) <= 1
 
 
+def in_a_room(audio: np.ndarray, rt60: float = 0.6) -> np.ndarray:
+    """``audio`` in a room whose echo dies away by 60 dB in ``rt60`` s, written as floats: the echo
+    fades into the digital silence of the pauses, as in an editor's or a synthesiser's file."""
+    t = np.arange(int(rt60 * 16000)) / 16000
+    tail = np.random.default_rng(3).standard_normal(t.size) * np.exp(-6.9 * t / rt60)
+    response = tail / np.sqrt(np.sum(tail**2))
+    response[0] += 1.0  # the direct sound
+    return scipy.signal.fftconvolve(audio, response)[: audio.size].astype(np.float32)
+
+
+def test_how_far_down_a_recording_s_floor_lies_does_not_matter():
+    """A room echoing into digital silence has a far wider range than any recording the models
+    learned from: it is heard as if under a noise floor, so that a noise 60, 80 or 100 dB under
+    its peak, or none, leaves its speech at 1, its echo fading alike and its zeros at 0."""
+    wet = np.r_[np.zeros(8000, np.float32), in_a_room(speech_between_silences())]
+    noise = np.abs(wet).max() * np.random.default_rng(1).standard_normal(wet.size)
+    heard = {None: features.speech_features(wet, 16000).mean(axis=1)}  # (T,)
+    for db in (-100, -80, -60):
+        noisy = (wet + 10 ** (db / 20) * noise).astype(np.float32)
+        heard[db] = features.speech_features(noisy, 16000).mean(axis=1)
+    np.testing.assert_array_equal(heard[None][:12], 0.0)  # the digital silence
+    for loudness in heard.values():
+        assert abs(np.percentile(loudness[12:], 95) - 1.0) < 0.05  # the speech level
+        np.testing.assert_allclose(loudness[88:92], heard[None][88:92], atol=0.03)  # the echo
+    assert 0.2 < heard[None][91] < heard[None][88] < 0.9  # fading
+
+
 def test_speech_features_of_steady_noise_or_silence_stay_small():
     """No speech to set the scale: the floor-to-speech range is not blown up to 1."""
     noise = 0.01 * np.random.default_rng(9).standard_normal(32000).astype(np.float32)
     assert np.abs(features.speech_features(noise, 16000).mean(axis=1)).max() < 0.3
     silence = features.speech_features(np.zeros(16000, np.float32), 16000)
     np.testing.assert_allclose(silence, 0.0, atol=1e-5)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_generator_s_recordings_are_heard_as_they_are(seed, monkeypatch):
+    """At the quietest noise floor the generator draws, a conversation's range stays within
+    MAX_SPEECH_RANGE: what the models learned from is never heard under added noise."""
+    quietest = VoiceConfig().noise_floor_db[0]
+    config = ConversationConfig(voice=VoiceConfig(noise_floor_db=(quietest, quietest)))
+    conversation = generate_conversation(20.0, seed, config)
+    heard = features.speech_features(conversation.audio, conversation.sample_rate)
+    monkeypatch.setattr(features, "MAX_SPEECH_RANGE", np.inf)
+    uncapped = features.speech_features(conversation.audio, conversation.sample_rate)
+    np.testing.assert_array_equal(heard, uncapped)
 
 
 def test_who_is_talking_from_the_agent_s_and_the_partner_s_recordings():
