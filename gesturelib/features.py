@@ -357,9 +357,8 @@ def mel_spectrogram(
     audio, sample_rate, fps, n_frames = _check_features_input(audio, sample_rate, fps)
     n_mels = _positive_int(n_mels, "n_mels")
     starts, window_length = _frame_window_starts(n_frames, sample_rate, fps)
-    n_fft = 1 << (window_length - 1).bit_length()  # next power of two >= window_length
+    n_fft, mel_basis = _mel_filter_bank(window_length, sample_rate, n_mels)
     window = librosa.filters.get_window("hann", window_length, fftbins=True).astype(np.float32)
-    mel_basis = librosa.filters.mel(sr=sample_rate, n_fft=n_fft, n_mels=n_mels).astype(np.float32)
 
     # Rounding the last window's start can push its end one sample past the audio: pad with zeros.
     overhang = int(starts[-1]) + window_length - audio.size
@@ -374,6 +373,14 @@ def mel_spectrogram(
         power = spectrum.real**2 + spectrum.imag**2
         mel_power[block] = power @ mel_basis.T
     return np.log(mel_power + np.float32(MEL_FLOOR))
+
+
+def _mel_filter_bank(window_length: int, sample_rate: int, n_mels: int) -> tuple[int, np.ndarray]:
+    """``(n_fft, mel_basis)``: the FFT length for a window (the next power of two) and the filter
+    bank ``(n_mels, n_fft // 2 + 1)`` float32 of :func:`mel_spectrogram`."""
+    n_fft = 1 << (window_length - 1).bit_length()
+    mel_basis = librosa.filters.mel(sr=sample_rate, n_fft=n_fft, n_mels=n_mels).astype(np.float32)
+    return n_fft, mel_basis
 
 
 def mfcc(
@@ -402,8 +409,8 @@ SPEECH_LEVEL_PERCENTILE = 95
 #: blown up into speech-sized features.
 MIN_SPEECH_RANGE = 2.0
 #: ...and at most this many (about 35 dB): the widest range of the generator's recordings, whose
-#: noise floors lie 30 to 60 dB under their peak. A recording with a wider one is heard as if a
-#: noise floor brought it down to this (:func:`speech_features`).
+#: noise floors lie 30 to 60 dB under their peak. A recording with a wider one is heard as if
+#: white noise brought it down to this (:func:`speech_features`).
 MAX_SPEECH_RANGE = 8.0
 
 
@@ -429,10 +436,11 @@ def speech_features(
 
     The speech level is taken as at most :data:`MAX_SPEECH_RANGE` nats above the floor, the
     widest range of the generator's recordings. A recording whose range is wider (one whose room
-    echoes into digital silence: its floor is the echo's last whisper) is heard as if a steady
-    noise lay under it, just loud enough to bring the range down to that (:func:`_under_noise`):
-    an echo far below the speech then reads near 0, as it would in any recording the models
-    learned from, and how far down the recording's own floor lies no longer matters.
+    echoes into digital silence: its floor is the echo's last whisper) is heard as if white noise
+    lay under it, as under the generator's, just loud enough to bring the range down to that
+    (:func:`_under_white_noise`). An echo far below the speech then reads near 0, as it would in
+    any recording the models learned from, and how far down the recording's own floor lies, or
+    whether it was written as floats or as 16-bit, no longer matters.
 
     The statistics are the recording's, so features of a clip cut from a longer recording differ
     slightly from the same frames of the whole: compute them on what the model will hear.
@@ -448,31 +456,42 @@ def speech_features(
         return np.zeros_like(log_mel)
     measured = _measurable(sound)
     quiet = measured & (loudness <= np.percentile(loudness[measured], NOISE_FLOOR_PERCENTILE))
-    above = log_mel - log_mel[quiet].mean(axis=0)  # (T, n_mels) minus the floor (n_mels,)
+    floor = log_mel[quiet].mean(axis=0)  # (n_mels,)
+    above = log_mel - floor  # (T, n_mels)
     above[~sound] = 0.0
     level = np.percentile(above[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
     if level > MAX_SPEECH_RANGE:
-        above = _under_noise(above, measured, MAX_SPEECH_RANGE)
+        _, window_length = _frame_window_starts(0, sample_rate, fps)
+        _, mel_basis = _mel_filter_bank(window_length, sample_rate, n_mels)
+        # White noise holds the same power in every FFT bin: a band, its filter's sum (an empty
+        # filter, at a low sample rate, holds none).
+        white = np.log(np.maximum(mel_basis.sum(axis=1), 1e-30)) - floor  # (n_mels,) over the floor
+        above = _under_white_noise(above, measured, white - white.mean(), MAX_SPEECH_RANGE)
         level = MAX_SPEECH_RANGE
     return (above / max(float(level), MIN_SPEECH_RANGE)).astype(np.float32)
 
 
-def _under_noise(above: np.ndarray, measured: np.ndarray, speech_range: float) -> np.ndarray:
-    """``above`` ``(T, n_mels)`` (nats over each band's floor) as heard under a noise floor ``c``
-    times the measured one, ``c`` such that the speech level reads ``speech_range`` nats over it.
+def _under_white_noise(
+    above: np.ndarray, measured: np.ndarray, white: np.ndarray, speech_range: float
+) -> np.ndarray:
+    """``above`` ``(T, n_mels)``, each band in nats over its floor, as heard with white noise
+    added: just enough that the speech level reads ``speech_range`` nats over the new floors.
 
-    A band ``a`` nats over its floor holds ``e^a`` times the floor's power; with ``c`` floors
-    more, it holds ``e^a + c`` over a floor of ``1 + c``. Digital silence (0) stays 0."""
+    ``white`` ``(n_mels,)`` is white noise's power in each band over its floor, in nats, up to
+    one constant for all bands. A band ``a`` nats over its floor holds ``e^a`` times the floor's
+    power; with ``n`` floors of noise more, it holds ``e^a + n`` over a floor of ``1 + n``. Digital
+    silence (0) stays 0."""
 
-    def heard(log_c: float) -> np.ndarray:
+    def heard(loudness: float) -> np.ndarray:
+        noise = (white + loudness).astype(above.dtype)  # (n_mels,), log of n per band
         # in above's precision, so that a band at its floor (0) comes out exactly 0
-        return np.logaddexp(above, log_c) - np.logaddexp(np.zeros(1, above.dtype), log_c)
+        return np.logaddexp(above, noise) - np.logaddexp(np.zeros(1, above.dtype), noise)
 
-    def excess(log_c: float) -> float:
-        level = np.percentile(heard(log_c)[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
+    def excess(loudness: float) -> float:
+        level = np.percentile(heard(loudness)[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
         return level - speech_range
 
-    # The level falls from the recording's own (c -> 0) towards 0 (c -> infinity).
+    # The level falls from the recording's own (no noise) towards 0 (noise drowning all).
     return heard(scipy.optimize.brentq(excess, -30.0, 60.0, xtol=1e-6))
 
 

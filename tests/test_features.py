@@ -492,11 +492,14 @@ def in_a_room(audio: np.ndarray, rt60: float = 0.6) -> np.ndarray:
 
 def test_how_far_down_a_recording_s_floor_lies_does_not_matter():
     """A room echoing into digital silence has a far wider range than any recording the models
-    learned from: it is heard as if under a noise floor, so that a noise 60, 80 or 100 dB under
-    its peak, or none, leaves its speech at 1, its echo fading alike and its zeros at 0."""
+    learned from: it is heard as if white noise lay under it, so that a noise 60, 80 or 100 dB
+    under its peak, or none, or 16-bit samples leave its speech at 1, its echo fading alike and
+    its zeros at 0."""
     wet = np.r_[np.zeros(8000, np.float32), in_a_room(speech_between_silences())]
     noise = np.abs(wet).max() * np.random.default_rng(1).standard_normal(wet.size)
     heard = {None: features.speech_features(wet, 16000).mean(axis=1)}  # (T,)
+    in_16_bits = (np.round(wet * 32767) / 32767).astype(np.float32)
+    heard["16-bit"] = features.speech_features(in_16_bits, 16000).mean(axis=1)
     for db in (-100, -80, -60):
         noisy = (wet + 10 ** (db / 20) * noise).astype(np.float32)
         heard[db] = features.speech_features(noisy, 16000).mean(axis=1)
