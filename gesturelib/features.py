@@ -33,6 +33,7 @@ Conventions:
 
 from __future__ import annotations
 
+import functools
 import numbers
 import os
 import struct
@@ -375,12 +376,23 @@ def mel_spectrogram(
     return np.log(mel_power + np.float32(MEL_FLOOR))
 
 
+@functools.lru_cache(maxsize=8)
 def _mel_filter_bank(window_length: int, sample_rate: int, n_mels: int) -> tuple[int, np.ndarray]:
     """``(n_fft, mel_basis)``: the FFT length for a window (the next power of two) and the filter
-    bank ``(n_mels, n_fft // 2 + 1)`` float32 of :func:`mel_spectrogram`."""
+    bank ``(n_mels, n_fft // 2 + 1)`` float32 of :func:`mel_spectrogram` (shared: do not write
+    to it)."""
     n_fft = 1 << (window_length - 1).bit_length()
     mel_basis = librosa.filters.mel(sr=sample_rate, n_fft=n_fft, n_mels=n_mels).astype(np.float32)
     return n_fft, mel_basis
+
+
+def _white_noise_bands(sample_rate: int, fps: int, n_mels: int) -> np.ndarray:
+    """White noise's log power in each band of :func:`mel_spectrogram` ``(n_mels,)``, up to one
+    constant: the noise holds the same power in every FFT bin, so a band holds its filter's sum
+    (an empty filter, at a low sample rate, holds next to none)."""
+    _, window_length = _frame_window_starts(0, sample_rate, fps)
+    _, mel_basis = _mel_filter_bank(window_length, sample_rate, n_mels)
+    return np.log(np.maximum(mel_basis.sum(axis=1), 1e-30))
 
 
 def mfcc(
@@ -408,9 +420,9 @@ SPEECH_LEVEL_PERCENTILE = 95
 #: rises 20 dB and more above a pause), so that a recording of silence or of steady noise is not
 #: blown up into speech-sized features.
 MIN_SPEECH_RANGE = 2.0
-#: ...and at most this many (about 35 dB): the widest range of the generator's recordings, whose
-#: noise floors lie 30 to 60 dB under their peak. A recording with a wider one is heard as if
-#: white noise brought it down to this (:func:`speech_features`).
+#: ...and at most this many (about 35 dB): wider than the range of any conversation the course
+#: generates (30 to 60 s, noise floors 30 to 60 dB under the peak). A recording with a wider one is
+#: heard as if white noise brought it down to this (:func:`speech_features`).
 MAX_SPEECH_RANGE = 8.0
 
 
@@ -434,8 +446,8 @@ def speech_features(
     making its quiet pauses read as speech. A recording of nothing but digital silence reads 0
     throughout.
 
-    The speech level is taken as at most :data:`MAX_SPEECH_RANGE` nats above the floor, the
-    widest range of the generator's recordings. A recording whose range is wider (one whose room
+    The speech level is taken as at most :data:`MAX_SPEECH_RANGE` nats above the floor, more than
+    the course's conversations span. A recording whose range is wider (one whose room
     echoes into digital silence: its floor is the echo's last whisper) is heard as if white noise
     lay under it, as under the generator's, just loud enough to bring the range down to that
     (:func:`_under_white_noise`). An echo far below the speech then reads near 0, as it would in
@@ -461,12 +473,9 @@ def speech_features(
     above[~sound] = 0.0
     level = np.percentile(above[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
     if level > MAX_SPEECH_RANGE:
-        _, window_length = _frame_window_starts(0, sample_rate, fps)
-        _, mel_basis = _mel_filter_bank(window_length, sample_rate, n_mels)
-        # White noise holds the same power in every FFT bin: a band, its filter's sum (an empty
-        # filter, at a low sample rate, holds none).
-        white = np.log(np.maximum(mel_basis.sum(axis=1), 1e-30)) - floor  # (n_mels,) over the floor
-        above = _under_white_noise(above, measured, white - white.mean(), MAX_SPEECH_RANGE)
+        # mel_spectrogram accepted the rate and fps above: any integers, NumPy's too
+        white = _white_noise_bands(int(sample_rate), int(fps), n_mels) - floor  # (n_mels,)
+        above = _under_white_noise(above, measured, white, MAX_SPEECH_RANGE)
         level = MAX_SPEECH_RANGE
     return (above / max(float(level), MIN_SPEECH_RANGE)).astype(np.float32)
 
@@ -477,22 +486,27 @@ def _under_white_noise(
     """``above`` ``(T, n_mels)``, each band in nats over its floor, as heard with white noise
     added: just enough that the speech level reads ``speech_range`` nats over the new floors.
 
-    ``white`` ``(n_mels,)`` is white noise's power in each band over its floor, in nats, up to
+    ``white`` ``(n_mels,)`` is white noise's log power in each band over the band's floor, up to
     one constant for all bands. A band ``a`` nats over its floor holds ``e^a`` times the floor's
     power; with ``n`` floors of noise more, it holds ``e^a + n`` over a floor of ``1 + n``. Digital
     silence (0) stays 0."""
+    white = white - white.mean()
 
-    def heard(loudness: float) -> np.ndarray:
-        noise = (white + loudness).astype(above.dtype)  # (n_mels,), log of n per band
-        # in above's precision, so that a band at its floor (0) comes out exactly 0
-        return np.logaddexp(above, noise) - np.logaddexp(np.zeros(1, above.dtype), noise)
+    def heard(log_noise: float) -> np.ndarray:
+        noise = (white + log_noise).astype(above.dtype)  # (n_mels,): log n in each band
+        zero = np.zeros(1, above.dtype)  # so that the result stays in above's precision
+        return np.logaddexp(above, noise) - np.logaddexp(zero, noise)
 
-    def excess(loudness: float) -> float:
-        level = np.percentile(heard(loudness)[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
+    def excess(log_noise: float) -> float:
+        level = np.percentile(heard(log_noise)[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
         return level - speech_range
 
-    # The level falls from the recording's own (no noise) towards 0 (noise drowning all).
-    return heard(scipy.optimize.brentq(excess, -30.0, 60.0, xtol=1e-6))
+    # At the lower end the noise is e^-40 of every band's floor or less: the level is the
+    # recording's own, above speech_range; at the upper end it is e^40 of every band's loudest
+    # frame or more: the level is about 0.
+    quietest = -40.0 - float(white.max())
+    loudest = 40.0 + float(above.max() - white.min())
+    return heard(scipy.optimize.brentq(excess, quietest, loudest, xtol=1e-6))
 
 
 def _measurable(sound: np.ndarray) -> np.ndarray:
