@@ -447,9 +447,9 @@ def speech_features(
     throughout.
 
     The speech level is taken as at most :data:`MAX_SPEECH_RANGE` nats above the floor, more than
-    the course's conversations span. A recording whose range is wider (one whose room
-    echoes into digital silence: its floor is the echo's last whisper) is heard as if white noise
-    lay under it, as under the generator's, just loud enough to bring the range down to that
+    the course's conversations span. A recording whose range is wider (one whose room echoes into
+    digital silence: its floor is the echo's last whisper) is heard as if white noise lay under
+    it, as under the generator's, just loud enough to bring the range down to that
     (:func:`_under_white_noise`). An echo far below the speech then reads near 0, as it would in
     any recording the models learned from, and how far down the recording's own floor lies, or
     whether it was written as floats or as 16-bit, no longer matters.
@@ -473,7 +473,7 @@ def speech_features(
     above[~sound] = 0.0
     level = np.percentile(above[measured].mean(axis=1), SPEECH_LEVEL_PERCENTILE)
     if level > MAX_SPEECH_RANGE:
-        # mel_spectrogram accepted the rate and fps above: any integers, NumPy's too
+        # int(): mel_spectrogram has checked them, and NumPy's integers lack bit_length
         white = _white_noise_bands(int(sample_rate), int(fps), n_mels) - floor  # (n_mels,)
         above = _under_white_noise(above, measured, white, MAX_SPEECH_RANGE)
         level = MAX_SPEECH_RANGE

@@ -7,8 +7,9 @@ retract its hands and rest before it prepares the next gesture), then two second
 that the speech and the silences are known (written beside the recordings in ``voices.csv``).
 
 A second set, the *selection* recordings, is made the same way with other sentences, mostly other
-voices (one is the test's female voice in the test's reverberant room), and is not committed: eight recordings to choose a front end or a recipe by, so that the five
-stay a test that nothing was tuned on (``benchmarks/bench_own_voice.py --recordings DIR``).
+voices (one is the test's female voice in the test's reverberant room), and is not committed:
+eight recordings to choose a front end or a recipe by, so that the five stay a test that nothing
+was tuned on (``benchmarks/bench_own_voice.py --recordings DIR``).
 
 Needs Debian's espeak-ng and sox (``apt-get install espeak-ng sox``). Run from the repository root:
 
