@@ -108,6 +108,34 @@ def test_data_dropout_changes_training_but_nothing_at_evaluation(data, trained_l
     assert not torch.equal(with_dropout, no_dropout.loss(batch)["loss"])
 
 
+def test_shift_bands_moves_each_item_and_fills_from_the_nearest_band_kept():
+    from gesturelib.models.control import shift_bands
+
+    speech = torch.arange(5.0).expand(3, 2, 4, 5)  # (B, L, W, n_mels): band b holds b
+    shifted = shift_bands(speech, torch.tensor([2, 0, -1]))
+    torch.testing.assert_close(shifted[0, 1, 3], torch.tensor([0.0, 0, 0, 1, 2]))  # a higher voice
+    torch.testing.assert_close(shifted[1], speech[1])
+    torch.testing.assert_close(shifted[2, 0, 0], torch.tensor([1.0, 2, 3, 4, 4]))  # a lower one
+
+
+def test_the_voice_shift_moves_the_speech_in_training_only(data):
+    from gesturelib.models.control import ControlEncoder
+
+    _, _, batch = data
+    shifting = ControlEncoder(dataclasses.replace(SMALL, voice_shift=2, dropout=0.0), hidden=8)
+    still = ControlEncoder(dataclasses.replace(SMALL, voice_shift=0, dropout=0.0), hidden=8)
+    still.load_state_dict(shifting.state_dict())
+    torch.testing.assert_close(shifting(batch), still(batch))  # generation hears the voice as it is
+    torch.manual_seed(0)
+    assert not torch.allclose(shifting(batch, training=True), still(batch, training=True))
+    torch.manual_seed(0)
+    again = shifting(batch, training=True)
+    torch.manual_seed(0)
+    torch.testing.assert_close(again, shifting(batch, training=True))  # seeded: reproducible
+    with pytest.raises(ValueError, match="voice_shift"):
+        MoGlowConfig(voice_shift=-1)
+
+
 def test_noise_off_the_surface_moves_no_limb_and_isotropic_noise_does(data):
     conversation, normaliser, _ = data
     pose = torch.tensor(

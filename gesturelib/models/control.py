@@ -8,7 +8,10 @@ The control ``c_t`` of frame ``t`` is what the next-frame flow is conditioned on
   (Alexanderson et al. 2020); validation and generation never drop;
 * the speech window (``speech_past`` past frames, the current one and 25 future ones: 1 s of
   look-ahead, because gestures lead the speech they go with) and the same window of who is
-  talking;
+  talking. With ``voice_shift``, training moves each excerpt's speech up or down by a few mel
+  bands, as a higher or lower voice would: the course's few voices then stand for more, and a
+  new voice is met by a model that has heard its register before (``docs/benchmarks.md``, "A
+  range the models never heard");
 * optionally MoGlow's style inputs (:mod:`gesturelib.style`).
 
 That is about 1.2k numbers a frame with 5 past speech frames (the Flow-VAE), 1.5k with 15
@@ -23,6 +26,7 @@ asked (``docs/benchmarks.md``, "Style that obeys").
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 from torch import nn
@@ -44,18 +48,25 @@ class ControlConfig(SpeechContext):
         style: also condition on the style measured from the motion (:mod:`gesturelib.style`).
         control_size: numbers the shared control encoder outputs; 0 passes the raw control on.
         dropout: probability of replacing each past pose by the mean pose while training.
+        voice_shift: while training, each excerpt's speech is moved by a whole number of mel
+            bands drawn uniformly from ``[-voice_shift, voice_shift]`` (0: never).
     """
+
+    #: Fields added after runs were saved, with the value those runs were trained with, so that
+    #: their checkpoints load as they were trained (:func:`gesturelib.configs.config_from_dict`).
+    FIELDS_ADDED: ClassVar[dict] = {"voice_shift": 0}
 
     past_poses: int = 5
     style: bool = False
     control_size: int = 64
     dropout: float = 0.4
+    voice_shift: int = 0
 
     def __post_init__(self):
         super().__post_init__()
         check_fields(
             self,
-            counts=("past_poses", "control_size"),
+            counts=("past_poses", "control_size", "voice_shift"),
             fractions=("dropout",),
             flags=("style",),
         )
@@ -109,16 +120,31 @@ class ControlEncoder(nn.Module):
         else:
             self.encoder = nn.Identity()
 
-    def forward(self, batch: dict[str, torch.Tensor], drop_past: bool = False) -> torch.Tensor:
+    def forward(self, batch: dict[str, torch.Tensor], training: bool = False) -> torch.Tensor:
         """Encode ``past_pose (B, L, tau, 54)``, ``speech (B, L, W, 27)`` and ``activity (B, L,
         W, 4)`` into ``(B, L, encoded_size)``, with ``style (B, L, 4)`` (if the config has it)
-        appended as it is; ``drop_past`` applies data dropout (training only)."""
+        appended as it is; ``training`` applies the voice shift and data dropout."""
         config = self.config
         past, speech, activity, *style = batch_parts(
             batch, control_shapes(config), type(self).__name__
         )
-        if drop_past and config.dropout > 0:
+        if training and config.voice_shift > 0:
+            shifts = torch.randint(
+                -config.voice_shift, config.voice_shift + 1, (len(speech),), device=speech.device
+            )
+            speech = shift_bands(speech, shifts)
+        if training and config.dropout > 0:
             kept = torch.rand(past.shape[:3], device=past.device) >= config.dropout
             past = past * kept[..., None]  # a dropped pose becomes the mean pose, zero
         flat = [part.flatten(2) for part in (past, speech, activity)]
         return torch.cat([self.encoder(torch.cat(flat, dim=-1)), *style], dim=-1)
+
+
+def shift_bands(speech: torch.Tensor, shifts: torch.Tensor) -> torch.Tensor:
+    """Each item's speech moved up (``shifts > 0``) or down the mel bands, the bands it leaves
+    empty filled with the nearest one it kept: ``speech (B, ..., n_mels)``, ``shifts (B,)`` whole
+    numbers -> ``(B, ..., n_mels)``."""
+    bands = torch.arange(speech.shape[-1], device=speech.device)
+    shifts = shifts.reshape(-1, *[1] * (speech.ndim - 1))
+    source = (bands - shifts).clamp(0, speech.shape[-1] - 1)  # (B, 1, ..., n_mels)
+    return speech.gather(-1, source.expand(speech.shape))

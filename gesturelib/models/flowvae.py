@@ -110,8 +110,8 @@ class LatentFlowConfig(ControlConfig):
     """What both Flow-VAEs share: the control, the autoencoder and the flow over its latent.
 
     Attributes:
-        speech_past, speech_future, past_poses, style, control_size, dropout: the control
-            (:class:`~gesturelib.models.control.ControlConfig`).
+        speech_past, speech_future, past_poses, style, control_size, dropout, voice_shift: the
+            control (:class:`~gesturelib.models.control.ControlConfig`).
         latent_dim: numbers per latent ``h_t`` (the paper: 35).
         autoencoder_hidden: units of the encoder's and the decoder's hidden layer (the paper: 105).
         steps: Glow steps ``K`` of the flow (the paper: 8).
@@ -126,7 +126,11 @@ class LatentFlowConfig(ControlConfig):
 
     #: Fields added after runs were saved, with the value those runs were trained with, so that
     #: their checkpoints load as they were trained (:func:`gesturelib.configs.config_from_dict`).
-    FIELDS_ADDED: ClassVar[dict] = {"leak": 0.0, "pull_to_rest": False}
+    FIELDS_ADDED: ClassVar[dict] = {
+        **ControlConfig.FIELDS_ADDED,
+        "leak": 0.0,
+        "pull_to_rest": False,
+    }
 
     latent_dim: int = 16
     autoencoder_hidden: int = 105
@@ -318,7 +322,7 @@ class _LatentFlowModel(nn.Module):
         (pose,) = batch_parts(batch, {"pose": (POSE_DIM,)}, f"{type(self).__name__}.loss")
         if self.training and hasattr(self, "rest_pose"):
             self._track_rest(pose, batch["past_pose"][:, :, -1])
-        control = self.control(batch, drop_past=self.training)
+        control = self.control(batch, training=self.training)
         generator = None if self.training else torch.Generator(pose.device).manual_seed(0)
         return pose, control, generator
 

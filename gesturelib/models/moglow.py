@@ -7,7 +7,8 @@ over the 54 pose numbers whose couplings hold LSTMs:
 
 * **The control** ``c_t`` of frame ``t`` (:mod:`gesturelib.models.control`): the previous
   ``tau = 5`` poses (with data dropout while training), the speech window with 1 s of
-  look-ahead and the same window of who is talking, encoded by one small network into
+  look-ahead (moved up or down a few mel bands while training) and the same window of who is
+  talking, encoded by one small network into
   ``control_size`` numbers that every coupling reads next to the untouched half of the pose, and
   optionally the style, read beside them as it is.
 * **Memory**: each coupling's LSTM runs along the frames, so the flow at frame ``t`` depends on
@@ -55,6 +56,9 @@ class MoGlowConfig(ControlConfig):
         speech_past: frames of past speech and activity, 15 (0.6 s; the paper: 5): a listener's
             nod comes up to half a second after the partner's phrase ends, which the control must
             still show when the head moves.
+        voice_shift: 2: while training, each excerpt's speech is moved by up to two of the 27
+            mel bands, so that a voice higher or lower than the course's drives the model as
+            theirs do (chapter 08); runs saved before the field existed had 0.
         speech_future, past_poses, style, control_size, dropout: the control
             (:class:`~gesturelib.models.control.ControlConfig`).
         steps: Glow steps ``K``.
@@ -66,6 +70,7 @@ class MoGlowConfig(ControlConfig):
     """
 
     speech_past: int = 15
+    voice_shift: int = 2
     steps: int = 8
     hidden: int = 128
     pose_noise: float = 0.05
@@ -124,13 +129,13 @@ class MoGlow(nn.Module):
         # Fixed noise in evaluation, so that the validation loss is the same every time.
         generator = None if self.training else torch.Generator(pose.device).manual_seed(0)
         noisy = pose + self.noise(pose, generator) - self._origin(batch)
-        log_prob, _ = self.flow.log_prob(noisy, self.conditioning(batch, drop_past=self.training))
+        log_prob, _ = self.flow.log_prob(noisy, self.conditioning(batch, training=self.training))
         nll = -log_prob.mean() / pose.shape[1]
         return {"loss": nll, "nll": nll.detach()}
 
-    def conditioning(self, batch, drop_past: bool = False) -> torch.Tensor:
+    def conditioning(self, batch, training: bool = False) -> torch.Tensor:
         """What every coupling reads: the encoded control ``(B, L, encoded_size)``."""
-        return self.control(batch, drop_past=drop_past)
+        return self.control(batch, training=training)
 
     @torch.no_grad()
     def latents(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:

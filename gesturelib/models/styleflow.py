@@ -314,12 +314,12 @@ class StyleFlow(MoGlow):
                 network.load_state_dict(features.state_dict())
             self.feature_encoder = network.encoder.requires_grad_(False)
 
-    def conditioning(self, batch, drop_past: bool = False) -> torch.Tensor:
+    def conditioning(self, batch, training: bool = False) -> torch.Tensor:
         """What every coupling reads: ``[c_t ; g_t]``, ``(B, L, control + global_size)``; the
         global part from ``batch["reference_code"] (B, 1, global_size)`` where the batch has
         one."""
         local = dict(batch, past_pose=batch["past_pose"][:, :, -LOCAL_POSES:])
-        control = self.control(local, drop_past=drop_past)
+        control = self.control(local, training=training)
         if self.global_encoder is None:
             return control
         reference = batch.get("reference_code")
@@ -332,7 +332,7 @@ class StyleFlow(MoGlow):
         (pose,) = batch_parts(batch, {"pose": (POSE_DIM,)}, "StyleFlow.loss")
         generator = None if self.training else torch.Generator(pose.device).manual_seed(0)
         origin = self._origin(batch)
-        condition = self.conditioning(batch, drop_past=self.training)
+        condition = self.conditioning(batch, training=self.training)
         log_prob, _ = self.flow.log_prob(pose + self.noise(pose, generator) - origin, condition)
         nll = -log_prob.mean() / pose.shape[1]
         terms = {"nll": nll, "reconstruction": nll.new_zeros(()), "perceptual": nll.new_zeros(())}
