@@ -152,11 +152,15 @@ class StyleFlowConfig(MoGlowConfig):
         perceptual: weight of the gesture perceptual loss (lambda_2 = 0.1); 0 trains without the
             feature network.
         features: the perceptual loss's feature network.
+        voice_shift: 0: the voices as recorded, as Ye et al. train (MoGlow's recipe moves them,
+            for chapter 08's recordings; on this flow that changed what chapter 09 measures:
+            ``docs/benchmarks.md``).
         steps, hidden, pose_noise, noise_moves_limbs, residual, speech_past, speech_future,
             control_size, dropout: as :class:`~gesturelib.models.moglow.MoGlowConfig`.
     """
 
     past_poses: int = 100
+    voice_shift: int = 0
     global_size: int = 16
     reconstruction: float = 1.0
     perceptual: float = 0.1
