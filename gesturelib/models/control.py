@@ -14,8 +14,8 @@ The control ``c_t`` of frame ``t`` is what the next-frame flow is conditioned on
   range the models never heard");
 * optionally MoGlow's style inputs (:mod:`gesturelib.style`).
 
-That is about 1.2k numbers a frame with 5 past speech frames (the Flow-VAE), 1.5k with 15
-(MoGlow). Read by the recurrent network of each of the ``K`` couplings, it would dominate the
+That is about 1.2k numbers a frame with 5 past speech frames (the papers'), 1.5k with 15 (the
+course's MoGlow and Flow-VAE). Read by the recurrent network of each of the ``K`` couplings, it would dominate the
 cost, so one small network (as Ye et al.'s global encoder) turns it into ``control_size`` numbers
 that all couplings read; ``control_size=0`` passes the raw control on, as the reference MoGlow
 code does. The style's four numbers (standardised) pass beside the encoder: mixed into its first

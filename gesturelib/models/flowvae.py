@@ -15,7 +15,9 @@ why the paper's model is smaller and faster to train than MoGlow.
 differs from the paper in three settings explained below (``detach_prior``, ``residual`` and
 ``leak``; the paper's: ``FlowVAEConfig(detach_prior=False, residual=False, leak=0)``). The recipe
 (:mod:`gesturelib.recipes`) also lowers the data dropout on the past poses from the paper's 0.4
-(the default) to 0.2: measured over six seeds, every run then keeps its drift and wrist speeds.
+(the default) to 0.2: measured over six seeds, every run then keeps its drift and wrist speeds;
+and it takes MoGlow's longer window of past speech (0.6 s) and shifted voices (``voice_shift``),
+with which every seed moves with voices it was not trained on (``docs/benchmarks.md``).
 Its loss (eq. 4) is
 
     alpha * NLL(h) + MSE(x, d(h)) + MSE(x, d(h')),     h = e(x),  h' = f^-1(z'; c), z' ~ N(0, I)
