@@ -15,12 +15,12 @@ The control ``c_t`` of frame ``t`` is what the next-frame flow is conditioned on
 * optionally MoGlow's style inputs (:mod:`gesturelib.style`).
 
 That is about 1.2k numbers a frame with 5 past speech frames (the papers'), 1.5k with 15 (the
-course's MoGlow and Flow-VAE). Read by the recurrent network of each of the ``K`` couplings, it would dominate the
-cost, so one small network (as Ye et al.'s global encoder) turns it into ``control_size`` numbers
-that all couplings read; ``control_size=0`` passes the raw control on, as the reference MoGlow
-code does. The style's four numbers (standardised) pass beside the encoder: mixed into its first
-layer with the other 1.5k they were mostly ignored, and the samples followed little of a style
-asked (``docs/benchmarks.md``, "Style that obeys").
+course's MoGlow and Flow-VAE). Read by the recurrent network of each of the ``K`` couplings, it
+would dominate the cost, so one small network (as Ye et al.'s global encoder) turns it into
+``control_size`` numbers that all couplings read; ``control_size=0`` passes the raw control
+on, as the reference MoGlow code does. The style's four numbers (standardised) pass beside the
+encoder: mixed into its first layer with the other 1.5k they were mostly ignored, and the samples
+followed little of a style asked (``docs/benchmarks.md``, "Style that obeys").
 """
 
 from __future__ import annotations
