@@ -7,7 +7,9 @@ changes from each seed through the load-or-train cache (``checkpoints/``: the ch
 and as mean ± sd over seeds: the wrist-speed Hellinger distance, wrist jerk, FGD, the
 speaking/listening ratio, the stroke lead, the accents hit, the listener's nods and their
 precision, the 99th percentile of the head's downward pitch speed, the correlation of the two
-wrists' speeds while the agent speaks (:func:`hand_correlation`), the drift
+wrists' speeds while the agent speaks (:func:`hand_correlation`), the wrists' mean speed while
+it speaks and in its pauses of under 4 s (:func:`pause_speed`: its hands retract and rise
+again), the two parts of the speaking/listening ratio that differ most from the truth's, the drift
 (:func:`gesturelib.evaluation.headline.drift`: the limb-angle error to the truth in the last
 10 s of the held-out conversations over the first 10 s, averaged over the samples first), the
 parameters and the training minutes; for a model trained with style inputs (``--change
@@ -35,9 +37,14 @@ import numpy as np
 import torch
 
 from data_synth import course_data, load_dataset
-from gesturelib.conventions import FPS
+from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation.fgd import feature_network
-from gesturelib.evaluation.headline import drift, hand_sharing, speaking_wrist_speeds
+from gesturelib.evaluation.headline import (
+    drift,
+    hand_sharing,
+    speaking_wrist_speeds,
+    wrist_speeds,
+)
 from gesturelib.evaluation.rules import head_pitch
 from gesturelib.evaluation.style_control import style_response
 from gesturelib.evaluation.table import score_draw
@@ -58,6 +65,8 @@ COLUMNS = (
     "nod_precision",
     "head_speed",
     "hand_correlation",
+    "speaking_speed",
+    "pause_speed",
     "drift",
     "minutes",
 )
@@ -99,6 +108,23 @@ def hand_correlation(motions: list, conversations) -> float:
     return hand_sharing(speaking_wrist_speeds(motions, conversations))["correlation"]
 
 
+def pause_speed(motions: list, conversations, longest_s: float = 4.0) -> float:
+    """The mean wrist speed (cm/s) over the agent's pauses shorter than ``longest_s``: runs of
+    frames where it does not speak (neither ``A_SPEAKS`` nor ``BOTH``; the partner may). In the
+    course's data the hands retract after a phrase and rise before the next, so these frames
+    hold most of the motion of the frames where the agent is silent; a model that moves too
+    little there overshoots the speaking/listening ratio."""
+    speeds = []
+    for motion, conversation in zip(motions, conversations, strict=True):
+        speaks = np.isin(conversation.activity, [Activity.A_SPEAKS, Activity.BOTH])[1:]
+        per_frame = wrist_speeds(motion, FPS).mean(axis=1)  # speed into frame t counts for t
+        edges = np.flatnonzero(np.diff(np.r_[False, ~speaks, False]))
+        for start, end in zip(edges[::2], edges[1::2], strict=True):
+            if end - start < longest_s * FPS:
+                speeds.append(per_frame[start:end])
+    return float(np.concatenate(speeds).mean()) if speeds else float("nan")
+
+
 def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:
     """The measures of one trained model, averaged over ``samples`` draws; ``save``: a file to
     write the draws' keypoints to (``sample<k>_conversation<i>``, ``(T, 9, 3)``)."""
@@ -122,6 +148,8 @@ def score(trained, test, features, samples: int, temperature: float | None, save
         row = score_draw(test, motions, features)
         row["head_speed"] = head_speed(motions)
         row["hand_correlation"] = hand_correlation(motions, test)
+        row["speaking_speed"] = float(speaking_wrist_speeds(motions, test).mean())
+        row["pause_speed"] = pause_speed(motions, test)
         draws.append(row)
         saved |= {f"sample{k}_conversation{i}": m for i, m in enumerate(motions)}
     if save is not None:
@@ -167,7 +195,9 @@ def main() -> None:
     truth = [c.positions for c in test]
     print(
         f"ground truth: head_speed {head_speed(truth):.4g}  "
-        f"hand_correlation {hand_correlation(truth, test):.4g}",
+        f"hand_correlation {hand_correlation(truth, test):.4g}  "
+        f"speaking_speed {speaking_wrist_speeds(truth, test).mean():.4g}  "
+        f"pause_speed {pause_speed(truth, test):.4g}",
         flush=True,
     )
     label = " ".join([args.model, *args.change, *args.train, *args.sampling]) + (
