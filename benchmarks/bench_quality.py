@@ -3,7 +3,8 @@
 The harness behind the model-quality experiments of ``docs/benchmarks.md``: trains a recipe
 (``python -m gesturelib train``'s, full mode unless ``--quick``) with the given model and training
 changes from each seed through the load-or-train cache (``checkpoints/``: the chapters' and
-``make results``' runs are reused), draws 3 samples per held-out conversation, and prints per seed
+``make results``' runs are reused), draws 3 samples per held-out conversation (``--split val``:
+per validation conversation, to choose a setting without the test set), and prints per seed
 and as mean ± sd over seeds: the wrist-speed Hellinger distance, wrist jerk, FGD, the
 speaking/listening ratio, the stroke lead, the accents hit, the listener's nods and their
 precision, the 99th percentile of the head's downward pitch speed, the correlation of the two
@@ -21,6 +22,7 @@ Usage (``make benchmark`` runs it without arguments: the Flow-VAE's recipe, seed
     .venv/bin/python benchmarks/bench_quality.py moglow --seeds 0 1 2
     .venv/bin/python benchmarks/bench_quality.py flowvae --change latent_noise=0 --train epochs=20
     .venv/bin/python benchmarks/bench_quality.py moglow --temperature 0.8   # same models, colder
+    .venv/bin/python benchmarks/bench_quality.py flowvae --temperature 1.2 --split val
     .venv/bin/python benchmarks/bench_quality.py diffusion --sampling steps=50 method=ddpm
     .venv/bin/python benchmarks/bench_quality.py moglow --change style=True
 """
@@ -177,6 +179,13 @@ def main() -> None:
     parser.add_argument(
         "--sampling", nargs="*", default=[], help="a diffusion model's Sampling fields: key=value"
     )
+    parser.add_argument(
+        "--split",
+        choices=("test", "val"),
+        default="test",
+        help="the conversations to score: the held-out test set, or the validation set (to "
+        "choose a setting, such as --temperature, without looking at the test set)",
+    )
     parser.add_argument("--quick", action="store_true", help="quick data and configs")
     parser.add_argument("--save", type=Path, help="a folder for each seed's draws (.npz)")
     args = parser.parse_args()
@@ -190,19 +199,21 @@ def main() -> None:
         parser.error(str(error))
     torch.set_num_threads(1)
     splits = load_dataset(course_data(args.quick))
-    test = splits["test"]
+    conversations = splits[args.split]
     features = fgd_features(splits, args.quick)
-    truth = [c.positions for c in test]
+    truth = [c.positions for c in conversations]
     print(
         f"ground truth: head_speed {head_speed(truth):.4g}  "
-        f"hand_correlation {hand_correlation(truth, test):.4g}  "
-        f"speaking_speed {speaking_wrist_speeds(truth, test).mean():.4g}  "
-        f"pause_speed {pause_speed(truth, test):.4g}",
+        f"hand_correlation {hand_correlation(truth, conversations):.4g}  "
+        f"speaking_speed {speaking_wrist_speeds(truth, conversations).mean():.4g}  "
+        f"pause_speed {pause_speed(truth, conversations):.4g}",
         flush=True,
     )
     label = " ".join([args.model, *args.change, *args.train, *args.sampling]) + (
         f" T={args.temperature}" if args.temperature is not None else ""
     )
+    if args.split != "test":
+        label += f" ({args.split})"
     rows = []
     for seed in args.seeds:
         started = time.perf_counter()
@@ -222,7 +233,7 @@ def main() -> None:
         if args.save is not None:
             args.save.mkdir(parents=True, exist_ok=True)
             save = args.save / f"seed{seed}.npz"
-        rows.append(score(trained, test, features, args.samples, args.temperature, save))
+        rows.append(score(trained, conversations, features, args.samples, args.temperature, save))
         parameters = sum(p.numel() for p in trained.model.parameters())
         print(
             f"{label} | seed {seed} | {parameters:,} parameters | "

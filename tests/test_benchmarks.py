@@ -151,6 +151,13 @@ def test_the_quality_benchmark_scores_each_seed_and_their_spread():
         r"pause_speed \d",
         output,
     )
+    output = run(
+        "bench_quality.py",
+        *("flowvae", "--quick", "--seeds", "0", "--samples", "1"),
+        "--split",
+        "val",
+    )
+    assert re.search(r"^flowvae \(val\) \| seed 0 \|", output, re.MULTILINE), output
     refused = launch("bench_quality.py", "flowvae", "--quick", "--change", "lek=0.1")
     assert refused.returncode == 2 and "unexpected keyword argument 'lek'" in refused.stderr
 
