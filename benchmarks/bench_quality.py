@@ -9,9 +9,9 @@ and as mean ± sd over seeds: the wrist-speed Hellinger distance, wrist jerk, FG
 speaking/listening ratio, the stroke lead, the accents hit, the listener's nods and their
 precision, the 99th percentile of the head's downward pitch speed, the correlation of the two
 wrists' speeds while the agent speaks (:func:`hand_correlation`), the wrists' mean speed while
-it speaks and in its pauses of under 4 s (:func:`pause_speed`: its hands retract and rise
-again), the two parts of the speaking/listening ratio that differ most from the truth's, the drift
-(:func:`gesturelib.evaluation.headline.drift`: the limb-angle error to the truth in the last
+it speaks and in its pauses of under 4 s (:func:`gesturelib.evaluation.pause_wrist_speed`: its
+hands retract and rise again), the two parts of the speaking/listening ratio that differ most
+from the truth's, the drift (:func:`gesturelib.evaluation.headline.drift`: the limb-angle error to the truth in the last
 10 s of the held-out conversations over the first 10 s, averaged over the samples first), the
 parameters and the training minutes; for a model trained with style inputs (``--change
 style=True``), also the share of a style change asked that its samples realise, per feature
@@ -39,13 +39,13 @@ import numpy as np
 import torch
 
 from data_synth import course_data, load_dataset
-from gesturelib.conventions import FPS, Activity
+from gesturelib.conventions import FPS
 from gesturelib.evaluation.fgd import feature_network
 from gesturelib.evaluation.headline import (
     drift,
     hand_sharing,
+    pause_wrist_speed,
     speaking_wrist_speeds,
-    wrist_speeds,
 )
 from gesturelib.evaluation.rules import head_pitch
 from gesturelib.evaluation.style_control import style_response
@@ -110,23 +110,6 @@ def hand_correlation(motions: list, conversations) -> float:
     return hand_sharing(speaking_wrist_speeds(motions, conversations))["correlation"]
 
 
-def pause_speed(motions: list, conversations, longest_s: float = 4.0) -> float:
-    """The mean wrist speed (cm/s) over the agent's pauses shorter than ``longest_s``: runs of
-    frames where it does not speak (neither ``A_SPEAKS`` nor ``BOTH``; the partner may). In the
-    course's data the hands retract after a phrase and rise before the next, so these frames
-    hold most of the motion of the frames where the agent is silent; a model that moves too
-    little there overshoots the speaking/listening ratio."""
-    speeds = []
-    for motion, conversation in zip(motions, conversations, strict=True):
-        speaks = np.isin(conversation.activity, [Activity.A_SPEAKS, Activity.BOTH])[1:]
-        per_frame = wrist_speeds(motion, FPS).mean(axis=1)  # speed into frame t counts for t
-        edges = np.flatnonzero(np.diff(np.r_[False, ~speaks, False]))
-        for start, end in zip(edges[::2], edges[1::2], strict=True):
-            if end - start < longest_s * FPS:
-                speeds.append(per_frame[start:end])
-    return float(np.concatenate(speeds).mean()) if speeds else float("nan")
-
-
 def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:
     """The measures of one trained model, averaged over ``samples`` draws; ``save``: a file to
     write the draws' keypoints to (``sample<k>_conversation<i>``, ``(T, 9, 3)``)."""
@@ -151,7 +134,7 @@ def score(trained, test, features, samples: int, temperature: float | None, save
         row["head_speed"] = head_speed(motions)
         row["hand_correlation"] = hand_correlation(motions, test)
         row["speaking_speed"] = float(speaking_wrist_speeds(motions, test).mean())
-        row["pause_speed"] = pause_speed(motions, test)
+        row["pause_speed"] = pause_wrist_speed(motions, test)
         draws.append(row)
         saved |= {f"sample{k}_conversation{i}": m for i, m in enumerate(motions)}
     if save is not None:
@@ -206,7 +189,7 @@ def main() -> None:
         f"ground truth: head_speed {head_speed(truth):.4g}  "
         f"hand_correlation {hand_correlation(truth, conversations):.4g}  "
         f"speaking_speed {speaking_wrist_speeds(truth, conversations).mean():.4g}  "
-        f"pause_speed {pause_speed(truth, conversations):.4g}",
+        f"pause_speed {pause_wrist_speed(truth, conversations):.4g}",
         flush=True,
     )
     label = " ".join([args.model, *args.change, *args.train, *args.sampling]) + (

@@ -2,18 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 
-import numpy as np
 import pytest
-
-from gesturelib.conventions import FPS, Activity
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
@@ -160,25 +155,6 @@ def test_the_quality_benchmark_scores_each_seed_and_their_spread():
     assert re.search(r"^flowvae \(val\) \| seed 0 \|", output, re.MULTILINE), output
     refused = launch("bench_quality.py", "flowvae", "--quick", "--change", "lek=0.1")
     assert refused.returncode == 2 and "unexpected keyword argument 'lek'" in refused.stderr
-
-
-def test_the_pause_speed_averages_the_wrists_over_short_pauses_only():
-    spec = importlib.util.spec_from_file_location("bench_quality", BENCHMARKS / "bench_quality.py")
-    bench_quality = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench_quality)
-    # Speaks 2 s, silent 1 s, speaks 2 s, silent 6 s (a pause too long to count), speaks 1 s.
-    codes = [Activity.A_SPEAKS] * 50 + [Activity.B_SPEAKS] * 25 + [Activity.BOTH] * 50
-    codes += [Activity.NONE] * 150 + [Activity.A_SPEAKS] * 25
-    activity = np.array(codes)
-    speeds = np.where(activity == Activity.B_SPEAKS, 10.0, 30.0)  # cm/s into each frame
-    track = np.cumsum(np.r_[0.0, speeds[1:] / FPS])
-    positions = np.zeros((len(codes), 9, 3))
-    positions[:, :, 0] = track[:, None]
-    conversation = SimpleNamespace(activity=activity)
-    assert bench_quality.pause_speed([positions], [conversation]) == pytest.approx(10.0)
-    assert bench_quality.pause_speed([positions], [conversation], longest_s=7.0) == pytest.approx(
-        (25 * 10.0 + 150 * 30.0) / 175
-    )
 
 
 @pytest.mark.parametrize("model", ["moglow", "flowvae"])

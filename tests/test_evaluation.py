@@ -7,6 +7,7 @@ from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation import (
     WRIST_SPEED_BINS,
     hand_sharing,
+    pause_wrist_speed,
     speaking_listening_ratio,
     speaking_wrist_speeds,
     stroke_lead,
@@ -72,6 +73,26 @@ def test_speaking_wrist_speeds_keep_the_frames_where_the_agent_speaks():
     speeds = speaking_wrist_speeds([motion], [SimpleNamespace(activity=activity)])
     assert speeds.shape == (40, 2)  # the speeds into frames 1-40
     np.testing.assert_allclose(speeds, [[10.0, 0.0]] * 40, atol=1e-9)
+
+
+def test_pause_wrist_speed_averages_the_wrists_over_short_pauses_only():
+    from types import SimpleNamespace
+
+    # Speaks 2 s, silent 1 s, speaks 2 s, silent 6 s (a pause too long to count), speaks 1 s.
+    codes = [Activity.A_SPEAKS] * 50 + [Activity.B_SPEAKS] * 25 + [Activity.BOTH] * 50
+    codes += [Activity.NONE] * 150 + [Activity.A_SPEAKS] * 25
+    activity = np.array(codes)
+    speeds = np.where(activity == Activity.B_SPEAKS, 10.0, 30.0)  # cm/s into each frame
+    track = np.cumsum(np.r_[0.0, speeds[1:] / FPS])
+    motion = np.repeat(t_pose()[None], len(codes), axis=0)
+    motion[:, :, 0] += track[:, None]
+    conversation = SimpleNamespace(activity=activity)
+    assert pause_wrist_speed([motion], [conversation]) == pytest.approx(10.0)
+    assert pause_wrist_speed([motion], [conversation], longest_s=7.0) == pytest.approx(
+        (25 * 10.0 + 150 * 30.0) / 175
+    )
+    speaking = SimpleNamespace(activity=np.full(len(codes), Activity.A_SPEAKS))
+    assert np.isnan(pause_wrist_speed([motion], [speaking]))
 
 
 def test_the_stroke_lead_of_the_generators_motion_is_its_rule():

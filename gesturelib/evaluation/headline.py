@@ -13,6 +13,9 @@ them (``docs/architecture.md`` states the contract):
   their accents by ``stroke_lead_s`` = 0.2 s.
 * :func:`hand_sharing` (of :func:`speaking_wrist_speeds`): whether one hand rests while the
   other gestures, as the agent's often does, or both always move together.
+* :func:`pause_wrist_speed`: how much the wrists move in the agent's short pauses, where the
+  generator's hands retract after a phrase and rise before the next; with the speed while it
+  speaks, the two parts of the speaking/listening ratio that models get most wrong.
 * :func:`error_over_time` and :func:`drift`: whether generated motion wanders off as a
   conversation goes on: its limb-angle error to the recorded motion per 10 s, and how much larger
   it is at the end than at the start. One sample's drift varies much from draw to draw: average
@@ -99,6 +102,26 @@ def speaking_wrist_speeds(
             for motion, c in zip(motions, conversations, strict=True)
         ]
     )
+
+
+def pause_wrist_speed(
+    motions: Sequence[np.ndarray], conversations, longest_s: float = 4.0, fps: int = FPS
+) -> float:
+    """The mean speed (cm/s) of both wrists over the agent's pauses shorter than ``longest_s``.
+
+    A pause is a run of frames where the agent does not speak (neither ``A_SPEAKS`` nor
+    ``BOTH``; the partner may); a speed between frames ``t - 1`` and ``t`` counts for frame
+    ``t``. ``motions`` are keypoints ``(T, 9, 3)``, one per conversation of ``conversations``
+    (whose ``activity`` says who talks). NaN where there is no such pause."""
+    speeds = []
+    for motion, conversation in zip(motions, conversations, strict=True):
+        silent = ~np.isin(np.asarray(conversation.activity)[1:], [Activity.A_SPEAKS, Activity.BOTH])
+        per_frame = wrist_speeds(motion, fps).mean(axis=1)
+        edges = np.flatnonzero(np.diff(np.r_[False, silent, False]))
+        for start, end in zip(edges[::2], edges[1::2], strict=True):
+            if end - start < longest_s * fps:
+                speeds.append(per_frame[start:end])
+    return float(np.concatenate(speeds).mean()) if speeds else float("nan")
 
 
 #: A wrist slower than this rests (cm/s: the first bin of :data:`WRIST_SPEED_BINS`).
