@@ -11,11 +11,11 @@ precision, the 99th percentile of the head's downward pitch speed, the correlati
 wrists' speeds while the agent speaks (:func:`hand_correlation`), the wrists' mean speed while
 it speaks and in its pauses of under 4 s (:func:`gesturelib.evaluation.pause_wrist_speed`: its
 hands retract and rise again), the two parts of the speaking/listening ratio that differ most
-from the truth's, the drift (:func:`gesturelib.evaluation.headline.drift`: the limb-angle error to the truth in the last
-10 s of the held-out conversations over the first 10 s, averaged over the samples first), the
-parameters and the training minutes; for a model trained with style inputs (``--change
-style=True``), also the share of a style change asked that its samples realise, per feature
-(:func:`gesturelib.evaluation.style_control.style_response`, 2 samples).
+from the truth's, the drift (:func:`gesturelib.evaluation.headline.drift`: the limb-angle error
+to the truth in the last 10 s of the held-out conversations over the first 10 s, averaged over
+the samples first), the parameters and the training minutes; for a model trained with style
+inputs (``--change style=True``), also the share of a style change asked that its samples
+realise, per feature (:func:`gesturelib.evaluation.style_control.style_response`, 2 samples).
 
 Usage (``make benchmark`` runs it without arguments: the Flow-VAE's recipe, seeds 0-2)::
 
@@ -110,7 +110,9 @@ def hand_correlation(motions: list, conversations) -> float:
     return hand_sharing(speaking_wrist_speeds(motions, conversations))["correlation"]
 
 
-def score(trained, test, features, samples: int, temperature: float | None, save=None) -> dict:
+def score(
+    trained, conversations, features, samples: int, temperature: float | None, save=None
+) -> dict:
     """The measures of one trained model, averaged over ``samples`` draws; ``save``: a file to
     write the draws' keypoints to (``sample<k>_conversation<i>``, ``(T, 9, 3)``)."""
     per_conversation = [
@@ -125,27 +127,27 @@ def score(trained, test, features, samples: int, temperature: float | None, save
             seed=0,
             progress=False,
         ).rotations
-        for c in test
+        for c in conversations
     ]
     draws, saved = [], {}
     for k in range(samples):
         motions = [forward_kinematics(r[k]) for r in per_conversation]
-        row = score_draw(test, motions, features)
+        row = score_draw(conversations, motions, features)
         row["head_speed"] = head_speed(motions)
-        row["hand_correlation"] = hand_correlation(motions, test)
-        row["speaking_speed"] = float(speaking_wrist_speeds(motions, test).mean())
-        row["pause_speed"] = pause_wrist_speed(motions, test)
+        row["hand_correlation"] = hand_correlation(motions, conversations)
+        row["speaking_speed"] = float(speaking_wrist_speeds(motions, conversations).mean())
+        row["pause_speed"] = pause_wrist_speed(motions, conversations)
         draws.append(row)
         saved |= {f"sample{k}_conversation{i}": m for i, m in enumerate(motions)}
     if save is not None:
         np.savez_compressed(save, **saved)
     per_draw = [key for key in COLUMNS if key not in ("drift", "minutes")]
     row = {key: float(np.mean([d[key] for d in draws])) for key in per_draw}
-    row["drift"] = drift([[r[k] for r in per_conversation] for k in range(samples)], test)
+    row["drift"] = drift([[r[k] for r in per_conversation] for k in range(samples)], conversations)
     row["minutes"] = sum(trained.history.epoch_seconds) / 60
     if getattr(trained.model.config, "style", False):
         responses = style_response(
-            trained.model, trained.normaliser, test, samples=2, temperature=temperature
+            trained.model, trained.normaliser, conversations, samples=2, temperature=temperature
         )
         row |= {f"{name}_share": response.share for name, response in responses.items()}
     return row
