@@ -7,6 +7,7 @@ from gesturelib.conventions import FPS, Activity
 from gesturelib.evaluation import (
     WRIST_SPEED_BINS,
     hand_sharing,
+    pause_speed_profile,
     pause_wrist_speed,
     speaking_listening_ratio,
     speaking_wrist_speeds,
@@ -93,6 +94,33 @@ def test_pause_wrist_speed_averages_the_wrists_over_short_pauses_only():
     )
     speaking = SimpleNamespace(activity=np.full(len(codes), Activity.A_SPEAKS))
     assert np.isnan(pause_wrist_speed([motion], [speaking]))
+
+
+def test_pause_speed_profile_follows_the_pauses_between_phrases_from_either_end():
+    from types import SimpleNamespace
+
+    # Silent 0.4 s at the start (not between phrases), speaks 1 s, a pause of 10 frames (its
+    # wrists at 3 cm/s per frame into it: 3, 6, ..., 30), speaks 1 s, a pause of 4 frames at
+    # 100 cm/s, speaks 1 s, silent 6 s (too long).
+    codes = [Activity.NONE] * 10 + [Activity.A_SPEAKS] * 25 + [Activity.B_SPEAKS] * 10
+    codes += [Activity.BOTH] * 25 + [Activity.NONE] * 4 + [Activity.A_SPEAKS] * 25
+    codes += [Activity.NONE] * 150
+    activity = np.array(codes)
+    speeds = np.full(len(codes), 50.0)  # cm/s into each frame
+    speeds[35:45] = 3.0 * np.arange(1, 11)
+    speeds[70:74] = 100.0
+    track = np.cumsum(np.r_[0.0, speeds[1:] / FPS])
+    motion = np.repeat(t_pose()[None], len(codes), axis=0)
+    motion[:, :, 0] += track[:, None]
+    conversation = SimpleNamespace(activity=activity)
+    after_end, before_start = pause_speed_profile([motion], [conversation], seconds=0.4)
+    assert after_end.shape == before_start.shape == (10,)
+    np.testing.assert_allclose(after_end[:4], (3.0 * np.arange(1, 5) + 100.0) / 2)
+    np.testing.assert_allclose(after_end[4:], 3.0 * np.arange(5, 11))
+    np.testing.assert_allclose(before_start[:4], (3.0 * np.arange(10, 6, -1) + 100.0) / 2)
+    np.testing.assert_allclose(before_start[4:], 3.0 * np.arange(6, 0, -1))
+    after_end, _ = pause_speed_profile([motion], [conversation], seconds=0.8)
+    assert np.isnan(after_end[10:]).all()
 
 
 def test_the_stroke_lead_of_the_generators_motion_is_its_rule():

@@ -7,6 +7,8 @@ name to its keypoints ``(T, 9, 3)``, one per held-out conversation (one draw of 
   joint (Taylor et al. 2021, Figure 6);
 * :func:`plot_speaking_listening`: the rate of change of that distance while the agent speaks
   and while it listens (their Figure 8);
+* :func:`plot_pause_profile`: the wrists' speed through the agent's short pauses, from its
+  phrase's end and up to its next phrase's start, against the ground truth's;
 * :func:`plot_hands`: each wrist's speed over time, per system: whether one hand rests while
   the other gestures;
 * :func:`plot_overlays`: each system's skeleton drawn once a second, overlaid.
@@ -21,7 +23,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from gesturelib.conventions import FPS
-from gesturelib.evaluation.headline import WRIST_SPEED_BINS, wrist_speed_histogram, wrist_speeds
+from gesturelib.evaluation.headline import (
+    WRIST_SPEED_BINS,
+    pause_speed_profile,
+    wrist_speed_histogram,
+    wrist_speeds,
+)
 from gesturelib.evaluation.style_control import LEVELS
 from gesturelib.metrics import distance_from_mean_pose, speaking_listening_statistics
 from gesturelib.skeleton import JOINT_INDEX, KEYPOINTS
@@ -200,6 +207,26 @@ def plot_speaking_listening(motions: dict, conversations, mean_pose: np.ndarray)
     )
     ax.set(ylabel="|change of distance\nfrom the mean pose| (cm/s)")
     ax.set_title("each system: speaking (dark), listening (light)", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def plot_pause_profile(motions: dict, truth, conversations, seconds: float = 1.5) -> plt.Figure:
+    """The wrists' mean speed through the agent's short pauses between its phrases
+    (:func:`~gesturelib.evaluation.headline.pause_speed_profile`), per system (lines) over the
+    ground truth's (grey): after a phrase ends (left) and before the next starts (right)."""
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2), sharey=True)
+    shown = {"ground truth": truth, **motions}
+    for index, (name, motion) in enumerate(shown.items()):
+        after_end, before_start = pause_speed_profile(motion, conversations, seconds)
+        times = np.arange(len(after_end)) / FPS
+        style = {"color": "0.6", "lw": 3.0} if index == 0 else {"color": f"C{index - 1}"}
+        axes[0].plot(times, after_end, label=name, **style)
+        axes[1].plot(-times, before_start, **style)
+    axes[0].set(xlabel="seconds after the agent's phrase ends", ylabel="wrist speed (cm/s)")
+    axes[1].set(xlabel="seconds before its next phrase starts")
+    axes[0].legend(fontsize=8)
+    fig.suptitle("the agent's short pauses: the hands retract, rest and rise again", fontsize=9)
     fig.tight_layout()
     return fig
 

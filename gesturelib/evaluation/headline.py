@@ -15,7 +15,8 @@ them (``docs/architecture.md`` states the contract):
   other gestures, as the agent's often does, or both always move together.
 * :func:`pause_wrist_speed`: how much the wrists move in the agent's short pauses, where the
   generator's hands retract after a phrase and rise before the next; with the speed while it
-  speaks, the two parts of the speaking/listening ratio that models get most wrong.
+  speaks, the two parts of the speaking/listening ratio that models get most wrong;
+  :func:`pause_speed_profile` follows it through those pauses, frame by frame.
 * :func:`error_over_time` and :func:`drift`: whether generated motion wanders off as a
   conversation goes on: its limb-angle error to the recorded motion per 10 s, and how much larger
   it is at the end than at the start. One sample's drift varies much from draw to draw: average
@@ -104,6 +105,19 @@ def speaking_wrist_speeds(
     )
 
 
+def _short_pauses(activity, longest_s: float, fps: int, between_phrases: bool = False):
+    """``(start, end)`` speed-frame indices (frame ``t`` is the speed from ``t`` to ``t + 1``
+    of the keypoints) of the agent's pauses shorter than ``longest_s``: runs of frames where it
+    does not speak (neither ``A_SPEAKS`` nor ``BOTH``; the partner may). ``between_phrases``:
+    only those with the agent's speech on both sides."""
+    silent = ~np.isin(np.asarray(activity)[1:], [Activity.A_SPEAKS, Activity.BOTH])
+    edges = np.flatnonzero(np.diff(np.r_[False, silent, False]))
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        inside = 0 < start and end < len(silent)
+        if end - start < longest_s * fps and (inside or not between_phrases):
+            yield start, end
+
+
 def pause_wrist_speed(
     motions: Sequence[np.ndarray], conversations, longest_s: float = 4.0, fps: int = FPS
 ) -> float:
@@ -115,13 +129,47 @@ def pause_wrist_speed(
     (whose ``activity`` says who talks). NaN where there is no such pause."""
     speeds = []
     for motion, conversation in zip(motions, conversations, strict=True):
-        silent = ~np.isin(np.asarray(conversation.activity)[1:], [Activity.A_SPEAKS, Activity.BOTH])
         per_frame = wrist_speeds(motion, fps).mean(axis=1)
-        edges = np.flatnonzero(np.diff(np.r_[False, silent, False]))
-        for start, end in zip(edges[::2], edges[1::2], strict=True):
-            if end - start < longest_s * fps:
-                speeds.append(per_frame[start:end])
+        for start, end in _short_pauses(conversation.activity, longest_s, fps):
+            speeds.append(per_frame[start:end])
     return float(np.concatenate(speeds).mean()) if speeds else float("nan")
+
+
+def pause_speed_profile(
+    motions: Sequence[np.ndarray],
+    conversations,
+    seconds: float = 2.0,
+    longest_s: float = 4.0,
+    fps: int = FPS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """How fast both wrists move through the agent's short pauses between two of its phrases,
+    frame by frame: where the generator's hands retract, rest and rise again.
+
+    Args:
+        motions: keypoints ``(T, 9, 3)``, one per conversation of ``conversations`` (whose
+            ``activity`` says who talks).
+        seconds: how far into the pauses to look, from either end.
+        longest_s: the pauses counted are shorter than this (as :func:`pause_wrist_speed`'s),
+            with the agent speaking before and after.
+    Returns:
+        ``(after_end, before_start)``, each ``(round(seconds * fps),)`` cm/s: ``after_end[k]``
+        the wrists' mean speed ``k`` frames after the agent's phrase ends (k = 0: the pause's
+        first frame), over the pauses at least ``k + 1`` frames long; ``before_start[k]`` the
+        same ``k`` frames before its next phrase starts (k = 0: the pause's last frame). NaN
+        where no pause is that long.
+    """
+    frames = round(seconds * fps)
+    sums, counts = np.zeros((2, frames)), np.zeros((2, frames))
+    for motion, conversation in zip(motions, conversations, strict=True):
+        per_frame = wrist_speeds(motion, fps).mean(axis=1)
+        for start, end in _short_pauses(conversation.activity, longest_s, fps, True):
+            n = min(frames, end - start)
+            sums[0, :n] += per_frame[start : start + n]
+            sums[1, :n] += per_frame[end - n : end][::-1]
+            counts[:, :n] += 1
+    with np.errstate(invalid="ignore"):
+        after_end, before_start = sums / counts
+    return after_end, before_start
 
 
 #: A wrist slower than this rests (cm/s: the first bin of :data:`WRIST_SPEED_BINS`).
