@@ -188,8 +188,8 @@ RECIPES: dict[str, Recipe] = {
         _QUICK_EXCERPTS,
         # Less data dropout than the paper's 0.4 (the config's default): over six seeds, every
         # run keeps its drift and its wrist speeds. MoGlow's 0.6 s of past speech, and voices
-        # moved by up to three mel bands while training: every seed then moves with voices it
-        # was not trained on (chapter 08; both in docs/benchmarks.md).
+        # moved by up to three mel bands while training, for voices it was not trained on
+        # (chapter 08; both in docs/benchmarks.md).
         FlowVAEConfig(**_FLOWVAE_CONTROL),
         FlowVAEConfig.quick(**_FLOWVAE_CONTROL),
         # Its validation loss falls every epoch while its generated motion does not improve with

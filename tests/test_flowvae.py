@@ -11,6 +11,7 @@ import torch.nn.functional as F
 
 from gesturelib.checkpoints import CheckpointMismatchError, load_model
 from gesturelib.configs import config_from_dict, config_to_dict
+from gesturelib.conventions import Activity
 from gesturelib.features import speech_features
 from gesturelib.models import (
     CVAE,
@@ -38,7 +39,9 @@ SIZES = dict(
     control_size=8,
 )
 #: The paper's model (frame by frame, its NLL training the encoder) with noise on the latent.
-PAPER = FlowVAEConfig(**SIZES, residual=False, leak=0.0, detach_prior=False, latent_noise=0.1)
+PAPER = FlowVAEConfig(
+    **SIZES, residual=False, leak=0.0, detach_prior=False, latent_noise=0.1, transition_weight=1.0
+)
 ELBO = VariationalFlowVAEConfig(**SIZES, residual=False, leak=0.0)
 
 
@@ -213,6 +216,40 @@ def test_each_term_of_the_papers_loss_on_a_known_answer(data, residual, leak):
     without = FlowVAE(dataclasses.replace(config, sample_weight=0.0)).double()
     without.load_state_dict(model.state_dict())
     torch.testing.assert_close(without.eval().loss(batch)["loss"], 0.3 * nll + terms["mse"])
+
+
+def test_the_decoded_sample_term_weighs_the_agents_pauses_next_to_its_speech(data):
+    """``transition_weight`` multiplies the decoded-sample error of the frames where the agent
+    is silent with its own speech in the window; other frames keep weight 1."""
+    _, normaliser, batch, _ = data
+    config = dataclasses.replace(PAPER, latent_noise=0.0, transition_weight=4.0)
+    model = build(config, normaliser, batch).double().eval()
+    batch = {name: part.double() for name, part in batch.items()}
+    codes = torch.full(batch["activity"].shape[:3], int(Activity.NONE))  # (B, L, W)
+    now = config.speech_past
+    codes[:, 1, now] = Activity.A_SPEAKS  # speaking: weight 1
+    codes[:, 2, 0] = Activity.BOTH  # silent, the agent spoke at the window's start
+    codes[:, 3, -1] = Activity.A_SPEAKS  # silent, the agent speaks at the window's end
+    codes[:, 4, now] = Activity.B_SPEAKS  # listening, the agent silent all window: weight 1
+    batch["activity"] = F.one_hot(codes, batch["activity"].shape[-1]).double()
+    terms = model.loss(batch)
+    paper = FlowVAE(dataclasses.replace(config, transition_weight=1.0)).double().eval()
+    paper.load_state_dict(model.state_dict())
+    reference = paper.loss(batch)
+    # The same draw, so the per-frame errors are the same; only their weights differ.
+    torch.testing.assert_close(terms["sample_mse"], reference["sample_mse"])
+    z = torch.randn(
+        batch["pose"].shape[:2] + (config.latent_dim,),
+        generator=torch.Generator().manual_seed(0),
+        dtype=torch.float64,
+    )
+    drawn, _, _ = model.flow.inverse(z, model.control(batch))
+    per_frame = (model.decode(drawn) - batch["pose"]).square().mean(-1)
+    weights = torch.ones_like(per_frame)
+    weights[:, 2:4] = 4.0
+    base = config.alpha * terms["nll"] + terms["mse"]
+    torch.testing.assert_close(terms["loss"], base + (weights * per_frame).mean())
+    torch.testing.assert_close(reference["loss"], base + per_frame.mean())
 
 
 @pytest.mark.parametrize("residual", [False, True])
